@@ -1,0 +1,234 @@
+"""Tetrahedral meshes: loading, generating, checking, and embedding points in them.
+
+A :class:`Mesh` holds rest node positions (n, 3) in metres and linear tetrahedra (m, 4), positively oriented.
+Files are read with meshio (legacy VTK, VTU, Gmsh, ...); only ``tetra`` cells are kept, the triangles, lines
+and vertices such files often carry are ignored, and nodes used by no tetrahedron are dropped.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+__all__ = [
+    "Mesh",
+    "MeshError",
+    "box_mesh",
+    "embed",
+    "Embedding",
+    "load_mesh",
+    "trunk_mesh",
+]
+
+
+class MeshError(ValueError):
+    """A mesh that cannot be used; the message names the file and the element."""
+
+
+@dataclass
+class Mesh:
+    nodes: np.ndarray
+    """Rest positions of the nodes, (n, 3), metres."""
+    tets: np.ndarray
+    """Node indices of the linear tetrahedra, (m, 4), positively oriented."""
+    source: str = "<generated>"
+    """Where the mesh came from, for messages."""
+    file_tet_index: np.ndarray | None = field(default=None, repr=False)
+    """Index of each tetrahedron among the file's tetra cells (for error messages)."""
+
+    @property
+    def n_nodes(self) -> int:
+        return self.nodes.shape[0]
+
+    @property
+    def n_tets(self) -> int:
+        return self.tets.shape[0]
+
+    def volumes(self) -> np.ndarray:
+        X = self.nodes[self.tets]
+        return np.einsum("ij,ij->i", np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), X[:, 3] - X[:, 0]) / 6
+
+    def check(self) -> None:
+        """Reject degenerate and inverted tetrahedra, naming the first offending element."""
+        X = self.nodes[self.tets]
+        V = self.volumes()
+        edges = [X[:, i] - X[:, j] for i, j in ((1, 0), (2, 0), (3, 0), (2, 1), (3, 1), (3, 2))]
+        h = np.mean([np.linalg.norm(e, axis=1) for e in edges], axis=0)
+        rel = V / np.maximum(h, 1e-300) ** 3  # a regular tet has V/h^3 = 0.118
+        idx = self.file_tet_index if self.file_tet_index is not None else np.arange(self.n_tets)
+        bad = np.flatnonzero(np.abs(rel) < 1e-6)
+        if bad.size:
+            e = bad[0]
+            raise MeshError(f"{self.source}: tetrahedron {idx[e]} (nodes {self.tets[e].tolist()}) is degenerate "
+                            f"(volume {V[e]:.3g}, relative {rel[e]:.2g}); {bad.size} such element(s)")
+        bad = np.flatnonzero(rel < 0)
+        if bad.size:
+            e = bad[0]
+            raise MeshError(f"{self.source}: tetrahedron {idx[e]} (nodes {self.tets[e].tolist()}) is inverted "
+                            f"(negative volume {V[e]:.3g}); {bad.size} such element(s)")
+
+    def characteristic_length(self) -> float:
+        return float(np.linalg.norm(self.nodes.max(0) - self.nodes.min(0)))
+
+
+def load_mesh(path: str | Path, scale: float = 1.0) -> Mesh:
+    """Read the tetrahedra of any meshio-readable file; ``scale`` converts its unit to metres (mm: 0.001)."""
+    import meshio
+
+    path = Path(path)
+    if not path.is_file():
+        raise MeshError(f"{path}: mesh file not found")
+    try:
+        m = meshio.read(path)
+    except Exception as exc:  # meshio raises many kinds; the user needs the file and the reason
+        raise MeshError(f"{path}: could not be read as a mesh ({type(exc).__name__}: {exc})") from None
+    blocks = [c.data for c in m.cells if c.type == "tetra"]
+    if not blocks:
+        kinds = sorted({c.type for c in m.cells})
+        raise MeshError(f"{path}: contains no linear tetrahedra (cell types: {', '.join(kinds) or 'none'})")
+    tets = np.concatenate(blocks).astype(np.int64)
+    used, inverse = np.unique(tets, return_inverse=True)
+    nodes = np.asarray(m.points, dtype=float)[used, :3] * float(scale)
+    if not np.all(np.isfinite(nodes)):
+        raise MeshError(f"{path}: node coordinates contain NaN or infinite values")
+    mesh = Mesh(nodes, inverse.reshape(-1, 4), str(path), np.arange(tets.shape[0]))
+    mesh.check()
+    return mesh
+
+
+def _hex_grid_to_tets(shape: tuple[int, int, int]) -> np.ndarray:
+    """Conforming split of a structured (nx, ny, nz)-cell grid into 6 tets per cell.
+
+    Kuhn's split along a main diagonal, with the cell mirrored in every direction where its index is odd:
+    neighbouring cells then share face diagonals (conforming) and the mesh is mirror-symmetric, so a
+    symmetric load gives a symmetric answer (the plain Kuhn split twists a bent beam sideways).
+    Node (i, j, k) has index (k * (ny + 1) + j) * (nx + 1) + i.
+    """
+    nx, ny, nz = shape
+    i, j, k = np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij")
+    i, j, k = i.ravel(), j.ravel(), k.ravel()
+    ri, rj, rk = i % 2, j % 2, k % 2
+
+    def nid(di, dj, dk):
+        return ((k + (dk ^ rk)) * (ny + 1) + (j + (dj ^ rj))) * (nx + 1) + (i + (di ^ ri))
+
+    e = [(1, 0, 0), (0, 1, 0), (0, 0, 1)]
+    tets = []
+    for a, b in ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)):
+        p1 = e[a]
+        p2 = tuple(x + y for x, y in zip(e[a], e[b]))
+        tets.append(np.stack([nid(0, 0, 0), nid(*p1), nid(*p2), nid(1, 1, 1)], axis=1))
+    return np.concatenate(tets)
+
+
+def _orient(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    X = nodes[tets]
+    V = np.einsum("ij,ij->i", np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), X[:, 3] - X[:, 0])
+    tets = tets.copy()
+    neg = V < 0
+    tets[neg, 1], tets[neg, 2] = tets[neg, 2], tets[neg, 1].copy()
+    return tets
+
+
+def box_mesh(size=(1.0, 1.0, 1.0), divisions=(2, 2, 2), origin=(0.0, 0.0, 0.0)) -> Mesh:
+    """A rectangular block [origin, origin + size] split into 6 tetrahedra per grid cell."""
+    nx, ny, nz = divisions
+    xs = [np.linspace(o, o + s, n + 1) for o, s, n in zip(origin, size, divisions)]
+    Z, Y, X = np.meshgrid(xs[2], xs[1], xs[0], indexing="ij")
+    nodes = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
+    tets = _orient(nodes, _hex_grid_to_tets((nx, ny, nz)))
+    mesh = Mesh(nodes, tets, f"box {tuple(size)} / {tuple(divisions)}")
+    mesh.check()
+    return mesh
+
+
+def trunk_mesh(length: float = 0.195, radius_base: float = 0.013, radius_tip: float = 0.005,
+               resolution: float = 1.0) -> Mesh:
+    """A tapered cylinder along +z from z = 0 (base) to z = ``length`` (tip), like SOFA's trunk.
+
+    A square grid of the cross-section is mapped onto the disc (elliptical grid mapping) and extruded;
+    ``resolution`` 1 gives 6 x 6 cells across and 20 along (1029 nodes, 4320 tetrahedra); the number of
+    cells grows linearly with it in each direction. The tip centre (0, 0, length) is a node.
+    """
+    n_xy = max(2, 2 * int(round(3 * resolution)))
+    n_z = max(2, int(round(20 * resolution)))
+    s = np.linspace(-1.0, 1.0, n_xy + 1)
+    z = np.linspace(0.0, length, n_z + 1)
+    Z, Y, X = np.meshgrid(z, s, s, indexing="ij")
+    u = X * np.sqrt(1.0 - Y**2 / 2.0)
+    v = Y * np.sqrt(1.0 - X**2 / 2.0)
+    r = radius_base + (radius_tip - radius_base) * Z / length
+    nodes = np.stack([(u * r).ravel(), (v * r).ravel(), Z.ravel()], axis=1)
+    tets = _orient(nodes, _hex_grid_to_tets((n_xy, n_xy, n_z)))
+    mesh = Mesh(nodes, tets, f"trunk(length={length}, r={radius_base}->{radius_tip}, resolution={resolution})")
+    mesh.check()
+    return mesh
+
+
+@dataclass
+class Embedding:
+    """Points attached to the mesh by barycentric coordinates."""
+
+    tet: np.ndarray
+    """Index of the host tetrahedron of each point, (k,)."""
+    weights: np.ndarray
+    """Barycentric coordinates in the host, (k, 4); negative entries mean extrapolation."""
+    outside: np.ndarray
+    """Distance from each point to its host tetrahedron, (k,) metres (0 inside the mesh)."""
+
+    def matrix(self, mesh: Mesh) -> sp.csr_matrix:
+        """W (3k x 3n) with positions of the points = W @ nodal positions (node-major)."""
+        k = self.tet.shape[0]
+        rows, cols, vals = [], [], []
+        for a in range(4):
+            nodes = mesh.tets[self.tet, a]
+            for i in range(3):
+                rows.append(3 * np.arange(k) + i)
+                cols.append(3 * nodes + i)
+                vals.append(self.weights[:, a])
+        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                             shape=(3 * k, 3 * mesh.n_nodes))
+
+
+def _distance_to_tet(p: np.ndarray, X: np.ndarray) -> float:
+    """Euclidean distance from p to the solid tetrahedron X (4, 3): min over convex combinations."""
+    from scipy.optimize import nnls
+
+    big = 1e3 * max(1.0, float(np.abs(X).max()))
+    A = np.vstack([X.T, big * np.ones(4)])
+    b = np.concatenate([p, [big]])
+    lam, _ = nnls(A, b)
+    return float(np.linalg.norm(X.T @ lam - p))
+
+
+def embed(mesh: Mesh, points: np.ndarray) -> Embedding:
+    """Attach each point to the tetrahedron containing it or, if outside the mesh, to the nearest one.
+
+    The host of an outside point is the tetrahedron closest to it; its barycentric coordinates are then
+    extrapolated (as SOFA's BarycentricMapping does), and ``outside`` says how far it lies from the mesh.
+    """
+    points = np.atleast_2d(np.asarray(points, dtype=float))
+    X = mesh.nodes[mesh.tets]
+    T = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2)
+    Tinv = np.linalg.inv(T)
+    centroids = X.mean(axis=1)
+    tet = np.empty(len(points), dtype=np.int64)
+    weights = np.empty((len(points), 4))
+    outside = np.zeros(len(points))
+    for k, p in enumerate(points):
+        lam = np.einsum("mij,mj->mi", Tinv, p - X[:, 0])
+        bary = np.column_stack([1.0 - lam.sum(axis=1), lam])
+        worst = bary.min(axis=1)
+        e = int(np.argmax(worst))
+        if worst[e] < -1e-9:
+            # outside: pick the truly nearest of the candidates closest by centroid
+            cand = np.argsort(np.linalg.norm(centroids - p, axis=1))[:32]
+            dist = np.array([_distance_to_tet(p, X[c]) for c in cand])
+            e = int(cand[np.argmin(dist)])
+            outside[k] = float(dist.min())
+        tet[k] = e
+        weights[k] = np.concatenate([[1.0 - (Tinv[e] @ (p - X[e, 0])).sum()], Tinv[e] @ (p - X[e, 0])])
+    return Embedding(tet, weights, outside)

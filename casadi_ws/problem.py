@@ -1,0 +1,388 @@
+"""A workspace problem: the robot (mesh, material, boundary, loads), its actuators, and the point of interest.
+
+Built in Python (``Problem(...)``) or read from a YAML file (:func:`load_problem`, format in
+``docs/problem-format.md``). Every quantity is in SI units (m, N, Pa, kg/m^3); a mesh file drawn in another
+unit is converted by its ``scale``/``units`` key. Reading a file validates it completely before any heavy
+work: each mistake raises :class:`ProblemError` naming the file, the key path and what was expected.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .actuators import Cable, trunk_cable
+from .material import MATERIAL_MODELS, Material
+from .mesh import Mesh, MeshError, box_mesh, embed, load_mesh, trunk_mesh
+
+__all__ = [
+    "Problem",
+    "ProblemError",
+    "SolverSettings",
+    "default_problem",
+    "load_problem",
+    "nodes_in_box",
+    "nodes_on_plane",
+    "problem_from_dict",
+]
+
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+
+
+class ProblemError(ValueError):
+    """Invalid problem input. ``str()`` is one line: ``FILE: KEY: what was wrong``."""
+
+    def __init__(self, source: str, key: str, message: str):
+        self.source, self.key, self.message = source, key, message
+        super().__init__(f"{source}: {key}: {message}" if key else f"{source}: {message}")
+
+
+@dataclass
+class SolverSettings:
+    """Settings of the equilibrium (Newton) solve."""
+
+    tolerance: float = 1e-8
+    """Relative residual ||R|| / ||H^T u + F|| under which an equilibrium counts as verified."""
+    max_iterations: int = 30
+    """Newton iterations per solve (each load step of a continuation counts separately)."""
+    max_load_steps: int = 64
+    """Continuation steps allowed when a direct Newton solve fails."""
+
+
+@dataclass
+class Problem:
+    mesh: Mesh
+    """The body at rest (SI units)."""
+    material: Material
+    fixed_nodes: np.ndarray
+    """Indices of the nodes held fixed (zero displacement)."""
+    cables: list[Cable]
+    """Actuators; the input vector u holds their tensions in this order."""
+    end_effector: np.ndarray
+    """Rest position of the point of interest (3,), embedded in the mesh."""
+    gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """Gravitational acceleration (3,), m/s^2."""
+    point_loads: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
+    """(point, force) pairs: constant forces in N on embedded points."""
+    solver: SolverSettings = field(default_factory=SolverSettings)
+    name: str = "problem"
+    source: str = "<python>"
+
+    @property
+    def n_u(self) -> int:
+        return len(self.cables)
+
+    @property
+    def u_min(self) -> np.ndarray:
+        return np.array([c.u_min for c in self.cables], dtype=float)
+
+    @property
+    def u_max(self) -> np.ndarray:
+        return np.array([c.u_max for c in self.cables], dtype=float)
+
+
+def nodes_in_box(mesh: Mesh, lower, upper) -> np.ndarray:
+    """Indices of the nodes inside the axis-aligned box [lower, upper] (like SOFA's BoxROI)."""
+    x = mesh.nodes
+    return np.flatnonzero(np.all((x >= np.asarray(lower)) & (x <= np.asarray(upper)), axis=1))
+
+
+def nodes_on_plane(mesh: Mesh, point, normal, tolerance: float = 1e-9) -> np.ndarray:
+    """Indices of the nodes on or behind the plane: (x - point) . n <= tolerance, n the unit normal."""
+    n = np.asarray(normal, dtype=float)
+    n = n / np.linalg.norm(n)
+    return np.flatnonzero((mesh.nodes - np.asarray(point, dtype=float)) @ n <= tolerance)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# YAML reading and validation
+# ---------------------------------------------------------------------------------------------------------
+
+_TOP_KEYS = {"name", "description", "mesh", "material", "gravity", "fixed", "cables", "end_effector",
+             "loads", "solver", "workspace"}
+_MESH_GEN = {"generate", "length", "radius_base", "radius_tip", "resolution", "size", "divisions", "origin"}
+_MESH_FILE = {"file", "scale", "units"}
+_MATERIAL = {"model", "young_modulus", "poisson_ratio", "density"}
+_CABLE = {"name", "points", "pull_point", "trunk_routing", "u_min", "u_max"}
+_ROUTING = {"angle_deg", "kind", "radius", "taper", "z_start", "z_end", "spacing"}
+_SOLVER = {"tolerance", "max_iterations", "max_load_steps"}
+
+# Largest distance from the mesh allowed for a cable passage point, relative to the mesh's size. SOFA trunk
+# cables run in grooves slightly outside the mesh; a point farther out than this is almost surely a typo
+# or a unit mistake.
+MAX_OUTSIDE_RELATIVE = 0.05
+
+
+def _as_number(v):
+    """A YAML scalar as a number; PyYAML reads 1.8e7 (no exponent sign) as a string, accept it."""
+    if isinstance(v, str):
+        try:
+            return float(v)
+        except ValueError:
+            return v
+    return v
+
+
+class _Reader:
+    def __init__(self, source: str):
+        self.source = source
+
+    def fail(self, key: str, message: str):
+        raise ProblemError(self.source, key, message)
+
+    def mapping(self, value, key: str, allowed: set[str]) -> dict:
+        if not isinstance(value, dict):
+            self.fail(key, f"expected a mapping, got {type(value).__name__}")
+        for k in value:
+            if k not in allowed:
+                close = difflib.get_close_matches(str(k), sorted(allowed), n=1)
+                hint = f" (did you mean '{close[0]}'?)" if close else ""
+                self.fail(f"{key}.{k}" if key else str(k),
+                          f"unknown key{hint}; expected one of: {', '.join(sorted(allowed))}")
+        return value
+
+    def number(self, d: dict, name: str, key: str, default=None, *, lo=None, hi=None, lo_open=False,
+               hi_open=False, integer=False):
+        path = f"{key}.{name}" if key else name
+        if name not in d or d[name] is None:
+            if default is None:
+                self.fail(path, "missing (a number is required)")
+            return default
+        v = _as_number(d[name])
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            self.fail(path, f"expected a number, got {v!r}")
+        if not math.isfinite(v):
+            self.fail(path, f"expected a finite number, got {v!r}")
+        if integer and int(v) != v:
+            self.fail(path, f"expected an integer, got {v!r}")
+        if lo is not None and (v <= lo if lo_open else v < lo):
+            self.fail(path, f"must be {'>' if lo_open else '>='} {lo}, got {v!r}")
+        if hi is not None and (v >= hi if hi_open else v > hi):
+            self.fail(path, f"must be {'<' if hi_open else '<='} {hi}, got {v!r}")
+        return int(v) if integer else float(v)
+
+    def vector(self, v, path: str, n: int = 3) -> np.ndarray:
+        if not isinstance(v, (list, tuple)) or len(v) != n:
+            self.fail(path, f"expected a list of {n} numbers, got {v!r}")
+        v = [_as_number(x) for x in v]
+        for i, x in enumerate(v):
+            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+                self.fail(f"{path}[{i}]", f"expected a finite number, got {x!r}")
+        return np.asarray(v, dtype=float)
+
+    def points(self, v, path: str) -> np.ndarray:
+        if not isinstance(v, (list, tuple)) or len(v) == 0:
+            self.fail(path, f"expected a list of [x, y, z] points, got {v!r}")
+        return np.stack([self.vector(p, f"{path}[{i}]") for i, p in enumerate(v)])
+
+
+def _read_mesh(r: _Reader, d, base: Path) -> tuple[Mesh, dict]:
+    if not isinstance(d, dict):
+        r.fail("mesh", "expected a mapping with 'generate' or 'file'")
+    if "file" in d:
+        r.mapping(d, "mesh", _MESH_FILE)
+        f = d["file"]
+        if not isinstance(f, str):
+            r.fail("mesh.file", f"expected a path, got {f!r}")
+        scale = 1.0
+        if "units" in d:
+            if d["units"] not in UNITS:
+                r.fail("mesh.units", f"expected one of {', '.join(UNITS)}, got {d['units']!r}")
+            scale = UNITS[d["units"]]
+        if "scale" in d:
+            scale = r.number(d, "scale", "mesh", lo=0.0, lo_open=True)
+        path = Path(f) if Path(f).is_absolute() else base / f
+        try:
+            return load_mesh(path, scale), {}
+        except MeshError as exc:
+            r.fail("mesh.file", str(exc))
+    r.mapping(d, "mesh", _MESH_GEN)
+    kind = d.get("generate")
+    if kind == "trunk":
+        args = {k: r.number(d, k, "mesh", dflt, lo=0.0, lo_open=True) for k, dflt in
+                (("length", 0.195), ("radius_base", 0.013), ("radius_tip", 0.005), ("resolution", 1.0))}
+        return trunk_mesh(**args), args
+    if kind == "box":
+        size = r.vector(d.get("size", [1, 1, 1]), "mesh.size")
+        div = r.vector(d.get("divisions", [2, 2, 2]), "mesh.divisions")
+        if np.any(size <= 0):
+            r.fail("mesh.size", f"all sizes must be > 0, got {size.tolist()}")
+        if np.any(div < 1) or np.any(div != np.round(div)):
+            r.fail("mesh.divisions", f"expected positive integers, got {div.tolist()}")
+        origin = r.vector(d.get("origin", [0, 0, 0]), "mesh.origin")
+        return box_mesh(tuple(size), tuple(int(x) for x in div), tuple(origin)), {}
+    r.fail("mesh", "expected 'file: PATH' or 'generate: trunk|box'" if kind is None else
+           f"mesh.generate: expected 'trunk' or 'box', got {kind!r}")
+
+
+def _read_fixed(r: _Reader, d, mesh: Mesh) -> np.ndarray:
+    if not isinstance(d, dict) or len(d) != 1 or next(iter(d)) not in ("box", "plane"):
+        r.fail("fixed", f"expected exactly one of 'box: [[xmin, ymin, zmin], [xmax, ymax, zmax]]' or "
+                        f"'plane: {{point, normal, tolerance}}', got {d!r}")
+    if "box" in d:
+        b = d["box"]
+        if not isinstance(b, (list, tuple)) or len(b) != 2:
+            r.fail("fixed.box", f"expected [[xmin, ymin, zmin], [xmax, ymax, zmax]], got {b!r}")
+        lo, hi = r.vector(b[0], "fixed.box[0]"), r.vector(b[1], "fixed.box[1]")
+        if np.any(lo > hi):
+            r.fail("fixed.box", f"lower corner {lo.tolist()} exceeds upper corner {hi.tolist()}")
+        nodes, key = nodes_in_box(mesh, lo, hi), "fixed.box"
+    else:
+        p = r.mapping(d["plane"], "fixed.plane", {"point", "normal", "tolerance"})
+        point = r.vector(p.get("point"), "fixed.plane.point")
+        normal = r.vector(p.get("normal"), "fixed.plane.normal")
+        if np.linalg.norm(normal) == 0:
+            r.fail("fixed.plane.normal", "must not be the zero vector")
+        tol = r.number(p, "tolerance", "fixed.plane", 1e-6 * mesh.characteristic_length(), lo=0.0)
+        nodes, key = nodes_on_plane(mesh, point, normal, tol), "fixed.plane"
+    if nodes.size == 0:
+        lo, hi = mesh.nodes.min(0), mesh.nodes.max(0)
+        r.fail(key, f"selects no node (mesh spans {np.round(lo, 6).tolist()} to {np.round(hi, 6).tolist()} m)")
+    # rigid motions are prevented only by three fixed nodes that are not collinear
+    x = mesh.nodes[nodes] - mesh.nodes[nodes].mean(0)
+    sv = np.linalg.svd(x, compute_uv=False) if nodes.size >= 3 else np.zeros(2)
+    if nodes.size < 3 or sv[1] <= 1e-6 * mesh.characteristic_length():
+        r.fail(key, f"selects {nodes.size} node(s) on a line or fewer: they do not prevent rigid motion")
+    return nodes
+
+
+def _read_cables(r: _Reader, lst, mesh: Mesh) -> list[Cable]:
+    if not isinstance(lst, list) or not lst:
+        r.fail("cables", "expected a non-empty list of cables")
+    cables = []
+    size = mesh.characteristic_length()
+    for i, c in enumerate(lst):
+        key = f"cables[{i}]"
+        r.mapping(c, key, _CABLE)
+        name = str(c.get("name", f"cable{i + 1}"))
+        u_min = r.number(c, "u_min", key, 0.0)
+        u_max = r.number(c, "u_max", key, 100.0)
+        if u_min > u_max:
+            r.fail(f"{key}.u_min", f"lower bound {u_min} exceeds upper bound u_max = {u_max}")
+        if "trunk_routing" in c:
+            if "points" in c:
+                r.fail(key, "give either 'points' or 'trunk_routing', not both")
+            t = r.mapping(c["trunk_routing"], f"{key}.trunk_routing", _ROUTING)
+            kind = t.get("kind", "long")
+            if kind not in ("long", "short"):
+                r.fail(f"{key}.trunk_routing.kind", f"expected 'long' or 'short', got {kind!r}")
+            opts = {k: r.number(t, k, f"{key}.trunk_routing") for k in _ROUTING - {"kind"} if k in t}
+            cable = trunk_cable(kind=kind, u_min=u_min, u_max=u_max, name=name,
+                                **{"angle_deg": 0.0, **opts})
+        else:
+            if "points" not in c:
+                r.fail(f"{key}.points", "missing: give the passage points or a 'trunk_routing'")
+            pts = r.points(c["points"], f"{key}.points")
+            pull = r.vector(c["pull_point"], f"{key}.pull_point") if c.get("pull_point") is not None else None
+            if len(pts) < 2 and pull is None:
+                r.fail(f"{key}.points", "a cable needs at least two points, or one point and a pull_point")
+            cable = Cable(pts, pull, u_min, u_max, name)
+        emb = embed(mesh, cable.points)
+        far = np.flatnonzero(emb.outside > MAX_OUTSIDE_RELATIVE * size)
+        if far.size:
+            j = int(far[0])
+            r.fail(f"{key}.points[{j}]", f"point {np.round(cable.points[j], 6).tolist()} lies "
+                   f"{emb.outside[j]:.4g} m outside the mesh (allowed: {MAX_OUTSIDE_RELATIVE * size:.3g} m)")
+        cables.append(cable)
+    return cables
+
+
+def tip_centre(mesh: Mesh) -> np.ndarray:
+    """Centre of the mesh's top face along +z: mean x, y of the nodes at the largest z."""
+    z = mesh.nodes[:, 2]
+    top = mesh.nodes[z >= z.max() - 1e-6 * mesh.characteristic_length()]
+    return np.array([top[:, 0].mean(), top[:, 1].mean(), z.max()])
+
+
+def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) -> Problem:
+    """Validate a problem given as plain data (as read from YAML) and build it."""
+    r = _Reader(source)
+    base = base or Path.cwd()
+    if not isinstance(d, dict):
+        r.fail("", f"expected a mapping at the top level, got {type(d).__name__}")
+    r.mapping(d, "", _TOP_KEYS)
+    for k in ("mesh", "material", "fixed", "cables"):
+        if k not in d:
+            r.fail(k, "missing (required)")
+    mesh, _ = _read_mesh(r, d["mesh"], base)
+
+    m = r.mapping(d["material"], "material", _MATERIAL)
+    model = m.get("model", "corotational")
+    if model not in MATERIAL_MODELS:
+        close = difflib.get_close_matches(str(model), MATERIAL_MODELS, n=1)
+        r.fail("material.model", f"expected one of {', '.join(MATERIAL_MODELS)}, got {model!r}"
+               + (f" (did you mean '{close[0]}'?)" if close else ""))
+    material = Material(model,
+                        r.number(m, "young_modulus", "material", lo=0.0, lo_open=True),
+                        r.number(m, "poisson_ratio", "material", lo=-1.0, hi=0.5, lo_open=True, hi_open=True),
+                        r.number(m, "density", "material", 1000.0, lo=0.0))
+    gravity = r.vector(d["gravity"], "gravity") if d.get("gravity") is not None else np.zeros(3)
+    fixed = _read_fixed(r, d["fixed"], mesh)
+    cables = _read_cables(r, d["cables"], mesh)
+
+    ee = d.get("end_effector", "tip")
+    if ee == "tip":
+        end_effector = tip_centre(mesh)
+    else:
+        end_effector = r.vector(ee, "end_effector")
+    out = embed(mesh, end_effector[None]).outside[0]
+    if out > 1e-6 * mesh.characteristic_length():
+        r.fail("end_effector", f"point {end_effector.tolist()} lies {out:.4g} m outside the mesh")
+
+    loads = []
+    lst = d.get("loads") or []
+    if not isinstance(lst, list):
+        r.fail("loads", "expected a list of {point, force}")
+    for i, ld in enumerate(lst):
+        r.mapping(ld, f"loads[{i}]", {"point", "force"})
+        loads.append((r.vector(ld.get("point"), f"loads[{i}].point"),
+                      r.vector(ld.get("force"), f"loads[{i}].force")))
+
+    s = r.mapping(d.get("solver") or {}, "solver", _SOLVER)
+    solver = SolverSettings(r.number(s, "tolerance", "solver", 1e-8, lo=0.0, lo_open=True),
+                            r.number(s, "max_iterations", "solver", 30, lo=1, integer=True),
+                            r.number(s, "max_load_steps", "solver", 64, lo=1, integer=True))
+    name = str(d.get("name", Path(source).stem))
+    return Problem(mesh, material, fixed, cables, end_effector, gravity, loads, solver, name, source)
+
+
+def load_problem(path: str | Path) -> Problem:
+    """Read and validate a YAML problem file."""
+    import yaml
+
+    path = Path(path)
+    if not path.is_file():
+        raise ProblemError(str(path), "", "problem file not found")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+        raise ProblemError(str(path), "", f"malformed YAML: {where}{getattr(exc, 'problem', exc)}") from None
+    return problem_from_dict(data, str(path), path.parent)
+
+
+DEFAULT_PROBLEM = {
+    "name": "trunk_2cables",
+    "description": "Trunk-like robot with two long cables 90 degrees apart (paper, Section 6.1).",
+    "mesh": {"generate": "trunk", "length": 0.195, "radius_base": 0.013, "radius_tip": 0.005,
+             "resolution": 1.0},
+    "material": {"model": "corotational", "young_modulus": 1.8e7, "poisson_ratio": 0.45, "density": 1100.0},
+    "gravity": [0.0, -9.81, 0.0],
+    "fixed": {"box": [[-0.02, -0.02, -0.001], [0.02, 0.02, 0.02]]},
+    "cables": [
+        {"name": "long0", "trunk_routing": {"angle_deg": 0, "kind": "long"}, "u_min": 0, "u_max": 100},
+        {"name": "long90", "trunk_routing": {"angle_deg": 90, "kind": "long"}, "u_min": 0, "u_max": 100},
+    ],
+    "end_effector": "tip",
+}
+
+
+def default_problem() -> Problem:
+    """The built-in default problem: the 2-cable trunk of the paper (same as problems/trunk_2cables.yaml)."""
+    return problem_from_dict(DEFAULT_PROBLEM, "<built-in trunk_2cables>")

@@ -1,0 +1,42 @@
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from casadi_ws import Cable, Material, Problem, box_mesh, trunk_cable, trunk_mesh
+from casadi_ws.problem import nodes_in_box, nodes_on_plane
+
+# compiled element kernels are cached per machine; keep the tests' cache out of the user's home if asked
+os.environ.setdefault("CASADI_WS_CACHE", str(Path(tempfile.gettempdir()) / "casadi-ws-test-cache"))
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared" / "meshes"
+
+
+def cantilever(n=2, slender=10, model="linear", nu=0.3, E=1e6, L=0.2, cable_offset=None, loads=()):
+    """A square beam along +z clamped at z = 0, n elements across, cubic elements."""
+    h = L / slender
+    mesh = box_mesh((h, h, L), (n, n, slender * n), (-h / 2, -h / 2, 0.0))
+    cables = []
+    if cable_offset is not None:
+        zs = np.linspace(L / (slender * n), L, slender * n)
+        pts = np.column_stack([np.full_like(zs, cable_offset), np.zeros_like(zs), zs])
+        cables = [Cable(pts, np.array([cable_offset, 0.0, 0.0]), 0.0, 1e3, "arc")]
+    return Problem(mesh, Material(model, E, nu), nodes_on_plane(mesh, [0, 0, 0], [0, 0, 1]), cables,
+                   np.array([0.0, 0.0, L]), point_loads=list(loads), name="cantilever")
+
+
+def small_trunk(model="corotational", n_cables=2, gravity=True, resolution=0.5):
+    mesh = trunk_mesh(resolution=resolution)
+    cables = [trunk_cable(0, "long"), trunk_cable(90, "long"), trunk_cable(180, "short", u_max=150),
+              trunk_cable(270, "short", u_max=150)][:n_cables]
+    return Problem(mesh, Material(model, 1.8e7, 0.45, 1100.0), nodes_in_box(mesh, [-1, -1, -1], [1, 1, 0.02]),
+                   cables, np.array([0.0, 0.0, 0.195]),
+                   gravity=np.array([0.0, -9.81, 0.0]) if gravity else np.zeros(3), name="small_trunk")
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(1234)
