@@ -147,7 +147,10 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None) -> _New
             alpha *= 0.5
             if alpha < 1.0 / 64:
                 return _Newton(q, DIVERGED, its, nfac, rel, fac)
-        need_fresh = not (ok and alpha == 1.0 and theta < 0.25)
+        # keep the factorisation while it contracts fast, or slowly but enough to finish in 3 cheap steps
+        # (near the tolerance theta measures round-off, and a refactorisation would buy nothing)
+        rel_next = np.linalg.norm(R_try) / scale_try if ok else np.inf
+        need_fresh = not (ok and alpha == 1.0 and (theta < 0.25 or (theta < 0.7 and rel_next * theta**3 < tol)))
         if ok:
             q, R, scale, dq = q_try, R_try, scale_try, dq_bar
 
