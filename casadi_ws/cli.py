@@ -1,4 +1,4 @@
-"""Command line: ``casadi-ws equilibrium|demo ...``.
+"""Command line: ``casadi-ws equilibrium|solve|demo ...``.
 
 Exit codes: 0 success, 1 a solve did not converge (equilibrium), 2 bad input (problem file, arguments).
 Bad input prints one line naming the file and key; ``--debug`` shows the Python traceback instead.
@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -50,24 +51,52 @@ def cmd_equilibrium(args) -> int:
     return 0 if eq.converged else 1
 
 
-def cmd_demo(args) -> int:
-    import time
+def _prepare_out(path: str, overwrite: bool) -> Path:
+    out = Path(path)
+    if out.exists() and any(out.iterdir()) and not overwrite:
+        raise UsageError(f"--out: {out} already holds files; pass --overwrite to replace them")
+    out.mkdir(parents=True, exist_ok=True)
+    return out
 
-    from .equilibrium import solve_equilibrium
-    from .model import StaticModel
+
+def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
+    """Result files plus the three-view and 3-D pictures into ``out``."""
+    from .plots import three_views, workspace_3d
+
+    result.save(out)
+    three_views(result, out / "three_views.png", problem.mesh, title=f"{problem.name}: {result.method} workspace")
+    workspace_3d(result, out / "workspace_3d.png", problem.mesh, title=f"{problem.name}: {result.method}")
+    if not quiet:
+        s = result.summary()
+        print(f"{result.method}: {s['n_points']} reachable points, {s['n_failed']} failed, {s['time_s']:.1f} s")
+        print(f"wrote {out}/: summary.json points.csv failures.csv result.npz points.vtp (ParaView) "
+              f"three_views.png workspace_3d.png")
+
+
+def cmd_solve(args) -> int:
+    from .forward import ForwardSettings, forward
+
+    problem = _load(args.problem)
+    out = _prepare_out(args.out, args.overwrite)
+    if args.nd < 1:
+        raise UsageError(f"--nd: expected an integer >= 1, got {args.nd}")
+    settings = ForwardSettings(n_d=args.nd, workers=args.workers, progress=not args.quiet,
+                               store_states=args.store_states)
+    result = forward(problem, settings=settings)
+    write_outputs(result, problem, out, args.quiet)
+    return 0
+
+
+def cmd_demo(args) -> int:
+    from .forward import ForwardSettings, forward
     from .problem import default_problem
 
-    t0 = time.perf_counter()
     problem = default_problem()
-    model = StaticModel(problem)
-    t1 = time.perf_counter()
-    print(f"casadi-ws demo: {problem.name}, {problem.mesh.n_nodes} nodes, {problem.mesh.n_tets} tetrahedra, "
-          f"{problem.material.model} material, {problem.n_u} cables (model built in {t1 - t0:.2f} s)")
-    for u in ([0.0, 0.0], [50.0, 0.0], [50.0, 50.0], [100.0, 100.0]):
-        t = time.perf_counter()
-        eq = solve_equilibrium(model, u)
-        print(f"  u = {u} N -> tip = {np.round(eq.tip, 5).tolist()} m, {eq.status_name}, "
-              f"{eq.iterations} Newton iterations, residual {eq.residual:.1e}, {time.perf_counter() - t:.2f} s")
+    print(f"casadi-ws demo: forward workspace of the built-in '{problem.name}' ({problem.mesh.n_nodes} nodes, "
+          f"{problem.mesh.n_tets} tetrahedra, {problem.material.model}, {problem.n_u} cables, "
+          f"U = [0, 100] N x [0, 100] N, {args.nd} values per cable)")
+    result = forward(problem, settings=ForwardSettings(n_d=args.nd, progress=True))
+    write_outputs(result, problem, _prepare_out(args.out, True), quiet=False)
     return 0
 
 
@@ -82,7 +111,20 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--compact", action="store_true", help="print the JSON on one line")
     e.set_defaults(func=cmd_equilibrium)
 
-    d = sub.add_parser("demo", help="run the built-in default problem (2-cable trunk)")
+    s = sub.add_parser("solve", help="estimate the reachable workspace and write result files and plots")
+    s.add_argument("problem", help="problem YAML file")
+    s.add_argument("--method", choices=["forward"], default="forward", help="workspace method")
+    s.add_argument("--nd", type=int, default=11, help="forward: values per actuator (n_d^n_u equilibria)")
+    s.add_argument("--workers", type=int, default=1, help="forward: parallel processes")
+    s.add_argument("--out", required=True, help="output directory")
+    s.add_argument("--overwrite", action="store_true", help="replace the files of an existing output directory")
+    s.add_argument("--store-states", action="store_true", help="keep every point's nodal displacements")
+    s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    s.set_defaults(func=cmd_solve)
+
+    d = sub.add_parser("demo", help="forward workspace of the built-in default problem (2-cable trunk)")
+    d.add_argument("--nd", type=int, default=11, help="values per cable")
+    d.add_argument("--out", default="results/demo", help="output directory (replaced)")
     d.set_defaults(func=cmd_demo)
     return p
 

@@ -157,12 +157,13 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None) -> _New
 
 def solve_equilibrium(model, u, q0: np.ndarray | None = None, u0: np.ndarray | None = None,
                       fac: Factorization | None = None, tol: float | None = None,
-                      max_iter: int | None = None, continuation: bool = True) -> Equilibrium:
+                      max_iter: int | None = None, continuation: bool = True,
+                      guess: np.ndarray | None = None) -> Equilibrium:
     """Solve R(q, u) = 0.
 
-    ``q0`` is the warm start (default: rest); ``u0`` the tensions at which ``q0`` is an equilibrium, used
-    as the start of a continuation if the direct solve fails (default: continue from rest). ``fac`` is a
-    factorisation to reuse. ``tol`` and ``max_iter`` default to the problem's solver settings.
+    ``q0`` is a known equilibrium at tensions ``u0`` (default: rest): the warm start, and the start of a
+    continuation if the direct solve fails. ``guess`` overrides the first iterate (e.g. a predictor).
+    ``fac`` is a factorisation to try reusing. ``tol`` and ``max_iter`` default to the problem's settings.
     """
     settings = model.problem.solver
     tol = settings.tolerance if tol is None else tol
@@ -171,6 +172,8 @@ def solve_equilibrium(model, u, q0: np.ndarray | None = None, u0: np.ndarray | N
     if u.shape != (model.n_u,):
         raise ValueError(f"u must have {model.n_u} entries (one per cable), got {u.size}")
     q = np.zeros(model.n_dof) if q0 is None else np.asarray(q0, dtype=float).copy()
+    if guess is not None:
+        q = np.asarray(guess, dtype=float).copy()
 
     res = _newton(model, u, q, 1.0, tol, max_iter, fac)
     its, nfac, steps = res.iterations, res.factorizations, 0

@@ -1,0 +1,130 @@
+"""The workspace result shared by all methods, its files, and loading it back.
+
+A :class:`WorkspaceResult` holds the reachable end-effector points (each a verified equilibrium: relative
+residual below tolerance and u inside U), their inputs, optionally their nodal states, the failures
+(kept apart, never mixed in), counters, timings per phase, and the problem and settings used.
+
+Files written by :meth:`WorkspaceResult.save` into a directory:
+
+``summary.json``  method, n_points, n_failed, time_s, settings, counters, timings, problem description
+``points.csv``    one row per reachable point: x, y, z (m), u1..un (N)
+``failures.csv``  one row per failed point: u1..un, status, residual
+``result.npz``    all arrays (points, u, failures, states if kept, cells for forward-backward)
+``points.vtp``    the points as VTK PolyData with u as point data: opens in ParaView
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["WorkspaceResult", "load_result"]
+
+
+@dataclass
+class WorkspaceResult:
+    method: str
+    """``forward`` or ``forward-backward``."""
+    points: np.ndarray
+    """Reachable end-effector positions (k, 3), metres."""
+    u: np.ndarray
+    """Inputs of the reachable points (k, n_u), N."""
+    failed_u: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    """Inputs (or targets, for forward-backward) whose solve failed (f, n_u or 3)."""
+    failed_status: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    """Status code of each failure (see :mod:`casadi_ws.equilibrium`)."""
+    failed_residual: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """Relative residual reached by each failure."""
+    states: np.ndarray | None = None
+    """Nodal displacements of the reachable points (k, 3n), if kept."""
+    counters: dict = field(default_factory=dict)
+    """solves, newton_iterations, factorizations, ... (method-specific)."""
+    timings: dict = field(default_factory=dict)
+    """Seconds per phase; ``total`` is the whole run."""
+    settings: dict = field(default_factory=dict)
+    """The method's settings, as plain data."""
+    problem: dict = field(default_factory=dict)
+    """Name, source, mesh size, material, bounds: enough to say what was solved."""
+    rest_tip: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """End-effector position at rest (u = 0, no load), metres."""
+    arrays: dict = field(default_factory=dict)
+    """Further method-specific arrays (e.g. the forward-backward cells), saved in result.npz."""
+
+    @property
+    def n_points(self) -> int:
+        return int(self.points.shape[0])
+
+    @property
+    def n_failed(self) -> int:
+        return int(self.failed_status.shape[0])
+
+    def summary(self) -> dict:
+        return {
+            "method": self.method,
+            "n_points": self.n_points,
+            "n_failed": self.n_failed,
+            "time_s": float(self.timings.get("total", float("nan"))),
+            "settings": self.settings,
+            "counters": self.counters,
+            "timings": self.timings,
+            "problem": self.problem,
+            "rest_tip": self.rest_tip.tolist(),
+            "bounding_box": ([self.points.min(0).tolist(), self.points.max(0).tolist()]
+                             if self.n_points else None),
+            "units": {"points": "m", "u": "N", "time_s": "s"},
+        }
+
+    def save(self, directory: str | Path) -> Path:
+        d = Path(directory)
+        d.mkdir(parents=True, exist_ok=True)
+        (d / "summary.json").write_text(json.dumps(self.summary(), indent=2, default=_json_default) + "\n")
+        n_u = self.u.shape[1] if self.u.ndim == 2 else 0
+        header = ",".join(["x", "y", "z"] + [f"u{i + 1}" for i in range(n_u)])
+        np.savetxt(d / "points.csv", np.hstack([self.points, self.u.reshape(self.n_points, n_u)]),
+                   delimiter=",", header=header, comments="", fmt="%.10g")
+        nf = self.failed_u.shape[1] if self.failed_u.ndim == 2 else 0
+        fh = ",".join([f"u{i + 1}" for i in range(nf)] + ["status", "residual"])
+        np.savetxt(d / "failures.csv", np.hstack([self.failed_u.reshape(self.n_failed, nf),
+                                                  self.failed_status[:, None], self.failed_residual[:, None]]),
+                   delimiter=",", header=fh, comments="", fmt="%.10g")
+        arrays = dict(points=self.points, u=self.u, failed_u=self.failed_u, failed_status=self.failed_status,
+                      failed_residual=self.failed_residual, rest_tip=self.rest_tip,
+                      **{f"extra_{k}": v for k, v in self.arrays.items()})
+        if self.states is not None:
+            arrays["states"] = self.states
+        np.savez_compressed(d / "result.npz", **arrays)
+        self._save_vtp(d / "points.vtp")
+        return d
+
+    def _save_vtp(self, path: Path) -> None:
+        import pyvista as pv
+
+        cloud = pv.PolyData(self.points if self.n_points else np.zeros((0, 3)))
+        for i in range(self.u.shape[1] if self.u.ndim == 2 else 0):
+            cloud.point_data[f"u{i + 1}"] = self.u[:, i]
+        cloud.save(str(path))
+
+
+def _json_default(o):
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def load_result(directory: str | Path) -> WorkspaceResult:
+    """Read a result written by :meth:`WorkspaceResult.save`."""
+    d = Path(directory)
+    summary = json.loads((d / "summary.json").read_text())
+    with np.load(d / "result.npz") as z:
+        a = {k: z[k] for k in z.files}
+    return WorkspaceResult(
+        method=summary["method"], points=a["points"], u=a["u"], failed_u=a["failed_u"],
+        failed_status=a["failed_status"], failed_residual=a["failed_residual"], states=a.get("states"),
+        counters=summary["counters"], timings=summary["timings"], settings=summary["settings"],
+        problem=summary["problem"], rest_tip=a["rest_tip"],
+        arrays={k[len("extra_"):]: v for k, v in a.items() if k.startswith("extra_")})

@@ -1,0 +1,130 @@
+"""The forward method: against the linear model, cold solves, its own files, and honest failures."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import pyvista as pv
+from conftest import REPO, small_trunk
+
+from casadi_ws import StaticModel, solve_equilibrium
+from casadi_ws.equilibrium import factorize
+from casadi_ws.forward import ForwardSettings, forward, input_grid, snake_order
+from casadi_ws.result import load_result
+
+
+def test_snake_order_visits_every_grid_point_once_by_unit_steps():
+    for n_d, n_u in ((1, 2), (4, 1), (3, 3), (5, 2)):
+        idx = snake_order(n_d, n_u)
+        assert len({tuple(r) for r in idx}) == n_d**n_u == len(idx)
+        if len(idx) > 1:
+            assert np.all(np.abs(np.diff(idx, axis=0)).sum(axis=1) == 1)
+
+
+def _linear_prediction(model):
+    """p = p0 + A u with A = C K^-1 (-dR/du) at rest: exact for a linear body under fixed forces.
+
+    A cable is not quite a fixed force: its tension adds a geometric stiffness u d2L/dq2, which bends the
+    image of U by ~0.03 of the span per newton on this trunk. The tests keep u tiny (1e-5 N) to make
+    that a 3e-7 effect."""
+    q0 = np.zeros(model.n_dof)
+    _, K, dRdu = model.residual_and_tangent(q0, np.zeros(model.n_u))
+    lu = factorize(K)
+    A = model.C_free @ np.column_stack([-lu.solve(dRdu[:, i]) for i in range(model.n_u)])
+    return model.p0, A
+
+
+@pytest.mark.parametrize("n_u", [1, 2])
+def test_linear_material_forward_cloud_is_the_linear_image_of_U(n_u):
+    pb = small_trunk("linear", n_cables=n_u, gravity=False)
+    for c in pb.cables:
+        c.u_max = 1e-5  # see _linear_prediction
+    model = StaticModel(pb)
+    res = forward(pb, settings=ForwardSettings(n_d=5, progress=False), model=model)
+    assert res.n_points == 5**n_u and res.n_failed == 0
+    p0, A = _linear_prediction(model)
+    pred = p0 + res.u @ A.T
+    span = np.linalg.norm(pred - p0, axis=1).max()
+    assert span > 0
+    assert np.abs(res.points - pred).max() < 2e-6 * span
+    if n_u == 1:  # on the straight segment, evenly spaced
+        d = np.diff(res.points, axis=0)
+        np.testing.assert_allclose(d, np.repeat(d[:1], len(d), axis=0), atol=2e-6 * span)
+    else:  # the corners of the parallelogram and its parallel sides
+        corners = {tuple(u): p for u, p in zip(res.u, res.points)}
+        a, b = np.array([0, 0]), pb.u_max
+        side1 = corners[(b[0], a[1])] - corners[(a[0], a[1])]
+        side2 = corners[(b[0], b[1])] - corners[(a[0], b[1])]
+        np.testing.assert_allclose(side1, side2, atol=2e-6 * span)
+
+
+def test_warm_started_grid_matches_cold_solves():
+    pb = small_trunk("corotational", n_cables=2)
+    model = StaticModel(pb)
+    res = forward(pb, settings=ForwardSettings(n_d=6, progress=False), model=model)
+    assert res.n_failed == 0
+    for k in (0, 7, 20, 35):
+        cold = solve_equilibrium(model, res.u[k])
+        assert cold.converged
+        assert np.linalg.norm(cold.tip - res.points[k]) < 1e-8  # metres
+    # the predictor did its job: about one factorisation per point
+    assert res.counters["factorizations"] < 2.5 * res.counters["solves"]
+
+
+def test_result_round_trip_and_files(tmp_path):
+    pb = small_trunk("corotational", n_cables=2)
+    res = forward(pb, settings=ForwardSettings(n_d=4, progress=False, store_states=True))
+    res.save(tmp_path)
+    back = load_result(tmp_path)
+    for name in ("points", "u", "failed_u", "failed_status", "failed_residual", "states", "rest_tip"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(res, name))
+    assert back.counters == res.counters and back.settings == res.settings and back.method == "forward"
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert {"method", "n_points", "n_failed", "time_s", "settings"} <= set(s)
+    assert s["n_points"] == 16 and s["settings"]["n_d"] == 4
+    csv = np.loadtxt(tmp_path / "points.csv", delimiter=",", skiprows=1)
+    assert csv.shape == (16, 5)
+    assert (tmp_path / "points.csv").read_text().splitlines()[0] == "x,y,z,u1,u2"
+    vtp = pv.read(tmp_path / "points.vtp")
+    assert vtp.n_points == 16 and "u2" in vtp.point_data
+    assert res.states.shape == (16, 3 * pb.mesh.n_nodes)
+
+
+def test_impossible_settings_produce_reported_failures_not_points():
+    pb = small_trunk("corotational", n_cables=2)
+    pb.solver.max_load_steps = 2
+    model = StaticModel(pb)
+    res = forward(pb, settings=ForwardSettings(n_d=4, progress=False, max_iter=1, predictor="none"), model=model)
+    assert res.n_failed > 0 and res.n_points + res.n_failed == 16
+    grid = {tuple(u) for u in input_grid(pb.u_min, pb.u_max, 4)}
+    assert {tuple(u) for u in res.failed_u} <= grid
+    assert np.all(res.failed_status != 0)
+    for u, p in zip(res.u, res.points):  # whatever is reported reachable is a verified equilibrium
+        eq = solve_equilibrium(model, u)
+        assert np.linalg.norm(eq.tip - p) < 1e-8
+    none = forward(pb, settings=ForwardSettings(n_d=3, progress=False, tol=1e-30), model=model)
+    assert none.n_points == 0 and none.n_failed == 9
+
+
+def test_parallel_workers_give_the_same_points():
+    pb = small_trunk("corotational", n_cables=2)
+    one = forward(pb, settings=ForwardSettings(n_d=10, progress=False))
+    two = forward(pb, settings=ForwardSettings(n_d=10, progress=False, workers=2))
+    assert two.settings["workers"] == 2
+    np.testing.assert_array_equal(one.u, two.u)
+    assert np.abs(one.points - two.points).max() < 1e-8
+
+
+def test_cli_solve_writes_files_and_refuses_to_overwrite(tmp_path):
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "casadi_ws.cli", "solve", str(REPO / "problems" / "trunk_2cables.yaml"),
+           "--nd", "2", "--out", str(out), "--quiet"]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout == ""  # quiet, and no solver chatter
+    for f in ("summary.json", "points.csv", "result.npz", "points.vtp", "three_views.png", "workspace_3d.png"):
+        assert (out / f).is_file(), f
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    assert r.returncode == 2 and "--overwrite" in r.stderr
