@@ -1,4 +1,4 @@
-"""Command line: ``casadi-ws equilibrium|solve|demo ...``.
+"""Command line: ``casadi-ws equilibrium|solve|compare|demo ...``.
 
 Exit codes: 0 success, 1 a solve did not converge (equilibrium), 2 bad input (problem file, arguments).
 Bad input prints one line naming the file and key; ``--debug`` shows the Python traceback instead.
@@ -69,21 +69,50 @@ def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
     if not quiet:
         s = result.summary()
         print(f"{result.method}: {s['n_points']} reachable points, {s['n_failed']} failed, {s['time_s']:.1f} s")
-        print(f"wrote {out}/: summary.json points.csv failures.csv result.npz points.vtp (ParaView) "
+        extra = " cells.vtu" if (out / "cells.vtu").exists() else ""
+        print(f"wrote {out}/: summary.json points.csv failures.csv result.npz points.vtp{extra} (ParaView) "
               f"three_views.png workspace_3d.png")
 
 
 def cmd_solve(args) -> int:
-    from .forward import ForwardSettings, forward
-
     problem = _load(args.problem)
-    out = _prepare_out(args.out, args.overwrite)
-    if args.nd < 1:
-        raise UsageError(f"--nd: expected an integer >= 1, got {args.nd}")
-    settings = ForwardSettings(n_d=args.nd, workers=args.workers, progress=not args.quiet,
-                               store_states=args.store_states)
-    result = forward(problem, settings=settings)
+    if args.method == "forward":
+        from .forward import ForwardSettings, forward
+
+        if args.nd < 1:
+            raise UsageError(f"--nd: expected an integer >= 1, got {args.nd}")
+        out = _prepare_out(args.out, args.overwrite)
+        settings = ForwardSettings(n_d=args.nd, workers=args.workers, progress=not args.quiet,
+                                   store_states=args.store_states)
+        result = forward(problem, settings=settings)
+    else:
+        from .backward import BackwardSettings
+        from .forward_backward import FBSettings, forward_backward
+
+        if not args.step > 0:
+            raise UsageError(f"--step: expected a grid step > 0 in metres, got {args.step}")
+        out = _prepare_out(args.out, args.overwrite)
+        settings = FBSettings(step=args.step, strategy=args.strategy, progress=not args.quiet,
+                              backward=BackwardSettings(formulation=args.backward), store_states=args.store_states)
+        result = forward_backward(problem, settings)
     write_outputs(result, problem, out, args.quiet)
+    return 0
+
+
+def cmd_compare(args) -> int:
+    from .compare import compare
+    from .plots import three_views
+    from .result import load_result
+
+    results = []
+    for d in (args.a, args.b):
+        if not (Path(d) / "summary.json").is_file():
+            raise UsageError(f"{d}: not a result directory (no summary.json)")
+        results.append(load_result(d))
+    report = compare(*results, step=args.step)
+    print(json.dumps(report, indent=2))
+    if args.plot:
+        three_views(results, args.plot, title="forward (blue) vs forward-backward (gray cells, red points)")
     return 0
 
 
@@ -113,14 +142,25 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("solve", help="estimate the reachable workspace and write result files and plots")
     s.add_argument("problem", help="problem YAML file")
-    s.add_argument("--method", choices=["forward"], default="forward", help="workspace method")
+    s.add_argument("--method", choices=["forward", "fb"], default="forward",
+                   help="forward (grid of U) or fb (forward-backward, grid of the end-effector space)")
     s.add_argument("--nd", type=int, default=11, help="forward: values per actuator (n_d^n_u equilibria)")
     s.add_argument("--workers", type=int, default=1, help="forward: parallel processes")
+    s.add_argument("--step", type=float, default=0.004, help="fb: grid step s_Ed in metres")
+    s.add_argument("--strategy", choices=["uniform", "relative"], default="uniform", help="fb: discretisation")
+    s.add_argument("--backward", choices=["reduced", "ipopt"], default="reduced", help="fb: backward solver")
     s.add_argument("--out", required=True, help="output directory")
     s.add_argument("--overwrite", action="store_true", help="replace the files of an existing output directory")
     s.add_argument("--store-states", action="store_true", help="keep every point's nodal displacements")
     s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     s.set_defaults(func=cmd_solve)
+
+    c = sub.add_parser("compare", help="agreement of two result directories (coverage, precision, Hausdorff)")
+    c.add_argument("a", help="result directory A (e.g. forward)")
+    c.add_argument("b", help="result directory B (e.g. forward-backward)")
+    c.add_argument("--step", type=float, default=None, help="grid step for the cell sets (default: B's)")
+    c.add_argument("--plot", default=None, help="write the overlaid three views to this PNG")
+    c.set_defaults(func=cmd_compare)
 
     d = sub.add_parser("demo", help="forward workspace of the built-in default problem (2-cable trunk)")
     d.add_argument("--nd", type=int, default=11, help="values per cable")

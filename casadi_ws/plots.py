@@ -55,9 +55,14 @@ def three_views(results, path, mesh=None, title: str | None = None, labels=None)
                 st["label"] = labels[i]
             cells = r.arrays.get("cells_centres")
             if cells is not None and len(cells):
-                step = float(r.arrays["cell_step"]) * 1e3
-                ax.scatter(cells[:, a] * 1e3, cells[:, b] * 1e3, s=(step * 2.0) ** 2 / 4, marker="s", c="0.55",
-                           alpha=0.25, lw=0, zorder=1, label=f"{st['label']} cells")
+                from matplotlib.collections import PatchCollection
+                from matplotlib.patches import Rectangle
+
+                h = float(r.arrays["cell_step"]) * 1e3
+                xy = np.unique(np.round(cells[:, [a, b]] * 1e3 / h).astype(np.int64), axis=0) * h
+                boxes = [Rectangle((x - h / 2, y - h / 2), h, h) for x, y in xy]
+                ax.add_collection(PatchCollection(boxes, facecolor="0.55", edgecolor="none", alpha=0.35,
+                                                  zorder=1, label=f"{st['label']} cells"))
             if r.n_points:
                 ax.scatter(r.points[:, a] * 1e3, r.points[:, b] * 1e3, s=st["size"], c=st["color"],
                            alpha=st["alpha"], lw=0, zorder=2 + i, label=f"{st['label']} ({r.n_points} points)")
@@ -65,6 +70,7 @@ def three_views(results, path, mesh=None, title: str | None = None, labels=None)
         ax.set_title(f"{name} plane")
         ax.set_xlabel(f"{_AXES[a]} (mm)")
         ax.set_ylabel(f"{_AXES[b]} (mm)")
+        ax.autoscale_view()
         ax.set_aspect("equal", adjustable="datalim")
         ax.grid(alpha=0.3)
     handles, labs = axes[0].get_legend_handles_labels()

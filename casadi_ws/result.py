@@ -11,6 +11,7 @@ Files written by :meth:`WorkspaceResult.save` into a directory:
 ``failures.csv``  one row per failed point: u1..un, status, residual
 ``result.npz``    all arrays (points, u, failures, states if kept, cells for forward-backward)
 ``points.vtp``    the points as VTK PolyData with u as point data: opens in ParaView
+``cells.vtu``     forward-backward only: the reached grid cells as VTK voxels
 """
 
 from __future__ import annotations
@@ -97,7 +98,22 @@ class WorkspaceResult:
             arrays["states"] = self.states
         np.savez_compressed(d / "result.npz", **arrays)
         self._save_vtp(d / "points.vtp")
+        if "cells_centres" in self.arrays and len(self.arrays["cells_centres"]):
+            self._save_cells(d / "cells.vtu")
         return d
+
+    def _save_cells(self, path: Path) -> None:
+        """The reached cells as VTK voxels (forward-backward's W_E)."""
+        import pyvista as pv
+
+        c = np.asarray(self.arrays["cells_centres"])
+        h = 0.5 * float(self.arrays["cell_step"])
+        corners = np.array([[i, j, k] for k in (-1, 1) for j in (-1, 1) for i in (-1, 1)], float) * h
+        pts = (c[:, None, :] + corners[None]).reshape(-1, 3)
+        conn = np.arange(len(pts)).reshape(-1, 8)
+        grid = pv.UnstructuredGrid({pv.CellType.VOXEL: conn}, pts)
+        grid.cell_data["u_norm"] = np.linalg.norm(self.u, axis=1) if self.u.size else np.zeros(len(c))
+        grid.save(str(path))
 
     def _save_vtp(self, path: Path) -> None:
         import pyvista as pv

@@ -1,0 +1,106 @@
+"""Step 3 of the forward-backward method: the backward problem (8).
+
+    min_{q, u} || C q + p_E(0) - target ||^2   s.t.  R(q, u) = 0,  u in U
+
+solved from a nearby equilibrium (the neighbour the target came from). Formulations behind one interface,
+:func:`backward`:
+
+``reduced``  Gauss-Newton in u only. At the current equilibrium, A = C K^-1 H^T (one LU, n_u solves) maps
+             du to the tip; a bounded linear least-squares problem gives du; the equilibrium at u + du is
+             corrected by Newton from the predictor q + K^-1 H^T du. Repeated until the step is small. Each
+             iterate is a verified equilibrium, so the answer always is one.
+``ipopt``    the full-space NLP over (q, u) (see :mod:`casadi_ws.nlp`), with exact derivatives from the
+             element functions and a primal-dual warm start; the answer is then re-verified.
+
+Status codes (``BackwardResult.status``): 0 solved (a verified equilibrium, closest point found),
+1 iteration limit (the last verified equilibrium is returned), 2 an equilibrium solve or the NLP failed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from .equilibrium import CONVERGED, Factorization, factorize, solve_equilibrium
+from .interval import sensitivity
+
+__all__ = ["BackwardResult", "BackwardSettings", "backward"]
+
+SOLVED, ITERATION_LIMIT, FAILED = 0, 1, 2
+
+
+@dataclass
+class BackwardSettings:
+    """Settings of the backward problem (8)."""
+
+    formulation: str = "reduced"
+    """``reduced`` (Gauss-Newton in u) or ``ipopt`` (full-space NLP)."""
+    max_iterations: int = 6
+    """Gauss-Newton iterations (reduced)."""
+    step_tolerance: float = 0.01
+    """Stop when the tip moves less than this fraction of the grid step (reduced): whether a cell is
+    reached is decided at the scale of the cell, and each further iteration costs an equilibrium."""
+
+
+@dataclass
+class BackwardResult:
+    q: np.ndarray
+    u: np.ndarray
+    tip: np.ndarray
+    status: int
+    iterations: int = 0
+    equilibrium_solves: int = 0
+    factorizations: int = 0
+    fac: Factorization | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.status != FAILED
+
+
+def backward(model, target, q, u, fac: Factorization | None = None, scale: float = 1e-3,
+             settings: BackwardSettings | None = None) -> BackwardResult:
+    """Solve (8) for ``target`` from the equilibrium (q, u); ``scale`` is a length (the grid step)."""
+    settings = settings or BackwardSettings()
+    if settings.formulation == "reduced":
+        return _reduced(model, np.asarray(target, float), q, np.asarray(u, float), fac, scale, settings)
+    if settings.formulation == "ipopt":
+        from .nlp import backward_ipopt
+
+        return backward_ipopt(model, np.asarray(target, float), q, np.asarray(u, float), settings)
+    raise ValueError(f"unknown backward formulation {settings.formulation!r}; expected 'reduced' or 'ipopt'")
+
+
+def _reduced(model, target, q, u, fac, scale, settings) -> BackwardResult:
+    n_eq = n_fac = 0
+    if fac is None:
+        _, K, _ = model.residual_and_tangent(q, u)
+        fac = Factorization(factorize(K), q.copy())
+        n_fac += 1
+    tip = model.tip(q)
+    for it in range(1, settings.max_iterations + 1):
+        A, S = sensitivity(model, q, fac)
+        # bounded linear least squares for du: min |tip + A du - target|^2, u_min <= u + du <= u_max
+        lo, hi = model.u_min - u, model.u_max - u
+        hi = np.maximum(hi, lo + 1e-300)  # lsq_linear wants lo < hi; a pinned bound keeps du = 0
+        du = lsq_linear(A, target - tip, bounds=(lo, hi), method="bvls").x if model.n_u else np.zeros(0)
+        du = np.clip(du, model.u_min - u, model.u_max - u)
+        if not np.any(du):
+            return BackwardResult(q, u, tip, SOLVED, it - 1, n_eq, n_fac, fac)
+        u_new = u + du
+        guess = q.copy()
+        guess[model.free] += S @ du
+        eq = solve_equilibrium(model, u_new, q0=q, u0=u, guess=guess)
+        n_eq += 1
+        n_fac += eq.factorizations
+        if eq.status != CONVERGED:
+            return BackwardResult(q, u, tip, FAILED, it, n_eq, n_fac, fac)
+        moved = np.linalg.norm(eq.tip - tip)
+        q, u, tip = eq.q, u_new, eq.tip
+        if eq.factorization is not None:
+            fac = eq.factorization
+        if moved < settings.step_tolerance * scale:
+            return BackwardResult(q, u, tip, SOLVED, it, n_eq, n_fac, fac)
+    return BackwardResult(q, u, tip, ITERATION_LIMIT, settings.max_iterations, n_eq, n_fac, fac)
