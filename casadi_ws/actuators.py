@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-__all__ = ["Cable", "cable_length_function", "trunk_cable"]
+__all__ = ["Cable", "cable_length_function", "cable_third_derivative_function", "trunk_cable"]
 
 
 @dataclass
@@ -51,6 +51,17 @@ def cable_length_function(n_points: int, has_pull_point: bool) -> ca.Function:
     g = ca.gradient(L, P)
     Hs = ca.hessian(L, P)[0]
     return ca.Function("cable_length", [P, pull], [L, g, ca.densify(Hs)], ["P", "pull"], ["L", "dL", "d2L"])
+
+
+def cable_third_derivative_function(n_points: int, has_pull_point: bool) -> ca.Function:
+    """SX function (P, pull, mu) -> d2(mu . dL/dP)/dP2: the cable's share of a Lagrangian Hessian."""
+    f = cable_length_function(n_points, has_pull_point)
+    P = ca.SX.sym("P", 3 * n_points)
+    pull = ca.SX.sym("pull", 3)
+    mu = ca.SX.sym("mu", 3 * n_points)
+    g = f(P, pull)[1]
+    T = ca.hessian(ca.dot(mu, g), P)[0]
+    return ca.Function("cable_third", [P, pull, mu], [ca.densify(T)], ["P", "pull", "mu"], ["T"])
 
 
 def trunk_cable(angle_deg: float, kind: str = "long", radius: float = 0.010, taper: float = 8.0 / 195.0,

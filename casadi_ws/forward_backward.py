@@ -155,6 +155,10 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
 
             print(f"forward-backward: iteration {counters['iterations']}: {len(new_frontier)} new cells, "
                   f"{len(reached)} reached, {counters['explored']} explored", file=sys.stderr)
+    if settings.backward.formulation == "ipopt":
+        from .nlp import release_solvers
+
+        release_solvers()
     counters["stopped_at_max_cells"] = bool(frontier)
     counters["feasible"] = len(reached)
     timings["total"] = time.perf_counter() - t0

@@ -1,0 +1,263 @@
+"""NLP formulations over the static model, solved by IPOPT with exact derivatives.
+
+The full-space problem has variables x = (q_free, u) and parameters p (here: a target):
+
+    min_x  || C q + p_E(0) - target ||^2      s.t.  R(q, u) = 0,   u_min <= u <= u_max
+
+CasADi's ``nlpsol`` would build the gradient, constraint Jacobian and Lagrangian Hessian by AD through the
+whole mesh (about 1 s per Hessian on the trunk). Instead they are supplied as CasADi Callbacks that call the
+model, which assembles them from the compiled per-element functions:
+
+    dR/dq      = K (element stiffness + sum_c u_c d2L_c)           the Newton tangent
+    dR/du_c    = dL_c/dq
+    d2(lam.R)  = sum_e d(K_e^T lam_e)/dq_e  +  sum_c u_c d2(lam . dL_c)/dq2      (q, q)
+                 d2L_c lam                                                   (q, u_c)
+
+The same pieces serve every formulation; :class:`FullSpaceNLP` is the one the backward problem (8) of the
+forward-backward method uses, and inverse control can reuse it with other objectives.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gc
+import os
+import sys
+
+import numpy as np
+import scipy.sparse as sp
+
+import casadi as ca
+
+from .actuators import cable_third_derivative_function
+from .equilibrium import CONVERGED, solve_equilibrium
+from .jit import ElementBatch
+
+__all__ = ["FullSpaceNLP", "backward_ipopt", "quiet_stdout", "release_solvers"]
+
+IPOPT_OPTIONS = {
+    # measured on the backward problem: gradient scaling quadruples the iterations from a warm start
+    "ipopt.nlp_scaling_method": "none",
+    "ipopt.mu_strategy": "adaptive",
+    "ipopt.warm_start_init_point": "yes",
+    "ipopt.mu_init": 1e-6,
+    "ipopt.warm_start_bound_push": 1e-9,
+    "ipopt.warm_start_mult_bound_push": 1e-9,
+    "ipopt.tol": 1e-10,
+    "ipopt.constr_viol_tol": 1e-10,
+    "ipopt.max_iter": 100,
+    "ipopt.print_level": 0,
+    "ipopt.sb": "yes",
+    "print_time": False,
+    "calc_lam_p": False,  # multipliers of the parameters would need AD through the callbacks
+    "no_nlp_grad": True,
+}
+
+
+def _pattern(M: sp.spmatrix) -> ca.Sparsity:
+    M = M.tocsc()
+    M.sort_indices()
+    return ca.Sparsity(M.shape[0], M.shape[1], M.indptr.tolist(), M.indices.tolist())
+
+
+class _Values:
+    """Scatter a scipy matrix onto a fixed CSC pattern (entries outside it must be zero)."""
+
+    def __init__(self, pattern: sp.csc_matrix):
+        P = pattern.tocsc()
+        P.sort_indices()
+        self.shape = P.shape
+        self.rows = P.indices.copy()
+        self.cols = np.repeat(np.arange(P.shape[1]), np.diff(P.indptr))
+        self.sparsity = _pattern(P)
+
+    def __call__(self, M) -> ca.DM:
+        vals = np.asarray(sp.csr_matrix(M)[self.rows, self.cols]).ravel()
+        return ca.DM(self.sparsity, vals)
+
+
+class FullSpaceNLP:
+    """Derivative pieces of the static model over x = (q_free, u) (see the module docstring)."""
+
+    def __init__(self, model):
+        self.model = model
+        m = model
+        self.nq, self.nu = m.n_free, m.n_u
+        self.nx = self.nq + self.nu
+        self._hv = ElementBatch(m.element_functions["hessian_vector"], m.backend)
+        self._third = [cable_third_derivative_function(c.W.shape[0] // 3, True) for c in m.cables]
+        rng = np.random.default_rng(0)
+        q = m.full(rng.normal(size=self.nq) * 1e-6)
+        u = np.ones(self.nu)
+        lam = rng.normal(size=self.nq)
+        _, K, dRdu = m.residual_and_tangent(q, u)
+        self.jac_pattern = sp.hstack([abs(K) + 1.0 * (K != 0), sp.csc_matrix(np.ones_like(dRdu))]).tocsc()
+        H = self.hessian(q, u, lam, 1.0)
+        H = abs(H) + (H != 0) + sp.csc_matrix(([1.0] * self.nx, (range(self.nx), range(self.nx))),
+                                              shape=(self.nx, self.nx))
+        self.hess_pattern = sp.triu(H).tocsc()
+        self.jac_values = _Values(self.jac_pattern)
+        self.hess_values = _Values(self.hess_pattern)
+
+    def split(self, x):
+        x = np.asarray(x, dtype=float).ravel()
+        return self.model.full(x[:self.nq]), x[self.nq:]
+
+    def jacobian(self, q, u) -> sp.csc_matrix:
+        _, K, dRdu = self.model.residual_and_tangent(q, u)
+        return sp.hstack([K, sp.csc_matrix(dRdu)]).tocsc()
+
+    def hessian(self, q, u, lam_g, lam_f, objective_hessian=None) -> sp.csc_matrix:
+        """Hessian of lam_f * f + lam_g . R over x (full, symmetric)."""
+        m = self.model
+        lam = np.zeros(m.n_dof)
+        lam[m.free] = lam_g
+        ue, Xe, Ge, Pe = m._element_inputs(q)
+        he, = self._hv(ue, Xe, Ge, Pe, lam[m._edofs])
+        data = np.bincount(m._k_slot, weights=he.ravel()[m._k_keep], minlength=m._k_nnz)
+        Hqq = sp.csc_matrix((data, m._k_rows, m._k_indptr), shape=(self.nq, self.nq))
+        Hqq = 0.5 * (Hqq + Hqq.T)
+        x = m.X + q
+        cols = []
+        for c, third, uc in zip(m.cables, self._third, u):
+            P = c.W @ x
+            mu = c.W @ lam
+            Wf = c.W[:, m.free]
+            T = np.asarray(third(P, c.pull, mu))
+            Hqq = Hqq + uc * (Wf.T @ sp.csr_matrix(T) @ Wf)
+            _, _, d2L = c.fun(P, c.pull)
+            cols.append(Wf.T @ (np.asarray(d2L) @ mu))
+        if objective_hessian is not None:
+            Hqq = Hqq + lam_f * objective_hessian
+        Hqu = sp.csc_matrix(np.column_stack(cols)) if cols else sp.csc_matrix((self.nq, 0))
+        return sp.bmat([[Hqq, Hqu], [Hqu.T, None]], format="csc") if self.nu else Hqq.tocsc()
+
+
+class _Fn(ca.Callback):
+    """A CasADi Callback around a Python function of numpy arrays with fixed output sparsities."""
+
+    def __init__(self, name, ins, outs, fn):
+        ca.Callback.__init__(self)
+        self._ins, self._outs, self._fn = ins, outs, fn
+        self.construct(name, {})
+
+    def get_n_in(self):
+        return len(self._ins)
+
+    def get_n_out(self):
+        return len(self._outs)
+
+    def get_name_in(self, i):
+        return self._ins[i][0]
+
+    def get_name_out(self, i):
+        return self._outs[i][0]
+
+    def get_sparsity_in(self, i):
+        return self._ins[i][1]
+
+    def get_sparsity_out(self, i):
+        return self._outs[i][1]
+
+    def eval(self, arg):
+        return self._fn(*[np.asarray(a.full()) for a in arg])
+
+
+class BackwardNLP:
+    """IPOPT solver of the backward problem (8), built once per model and reused with warm starts."""
+
+    def __init__(self, model):
+        self.model = model
+        self.pieces = pieces = FullSpaceNLP(model)
+        nx, nq = pieces.nx, pieces.nq
+        Cf = model.C_free
+        self._CtC = (2.0 * Cf.T @ Cf).tocsc()
+        dense = ca.Sparsity.dense
+
+        def f_and_g(x, p):
+            q, u = pieces.split(x)
+            e = model.tip(q) - p.ravel()
+            return [ca.DM(float(e @ e)), ca.DM(model.residual(q, u))]
+
+        def grad_f(x, p):
+            q, u = pieces.split(x)
+            e = model.tip(q) - p.ravel()
+            return [ca.DM(float(e @ e)), ca.DM(np.concatenate([2.0 * (Cf.T @ e), np.zeros(pieces.nu)]))]
+
+        def jac_g(x, p):
+            q, u = pieces.split(x)
+            return [ca.DM(model.residual(q, u)), pieces.jac_values(pieces.jacobian(q, u))]
+
+        def hess_lag(x, p, lam_f, lam_g):
+            q, u = pieces.split(x)
+            H = pieces.hessian(q, u, lam_g.ravel(), float(lam_f.ravel()[0]), self._CtC)
+            return [pieces.hess_values(sp.triu(H))]
+
+        xs, ps = ("x", dense(nx, 1)), ("p", dense(3, 1))
+        self._cbs = [
+            _Fn("nlp", [xs, ps], [("f", dense(1, 1)), ("g", dense(nq, 1))], f_and_g),
+            _Fn("grad_f", [xs, ps], [("f", dense(1, 1)), ("grad_f_x", dense(nx, 1))], grad_f),
+            _Fn("jac_g", [xs, ps], [("g", dense(nq, 1)), ("jac_g_x", pieces.jac_values.sparsity)], jac_g),
+            _Fn("hess_lag", [xs, ps, ("lam_f", dense(1, 1)), ("lam_g", dense(nq, 1))],
+                [("hess_gamma_x_x", pieces.hess_values.sparsity)], hess_lag),
+        ]
+        opts = dict(IPOPT_OPTIONS, grad_f=self._cbs[1], jac_g=self._cbs[2], hess_lag=self._cbs[3])
+        self.solver = ca.nlpsol("backward", "ipopt", self._cbs[0], opts)
+        self.lbx = np.concatenate([np.full(nq, -np.inf), model.u_min])
+        self.ubx = np.concatenate([np.full(nq, np.inf), model.u_max])
+        self.lam_g = np.zeros(nq)
+
+    def solve(self, target, q, u, lam_g=None):
+        m = self.model
+        x0 = np.concatenate([q[m.free], u])
+        sol = self.solver(x0=x0, p=target, lbx=self.lbx, ubx=self.ubx, lbg=0, ubg=0,
+                          lam_g0=self.lam_g if lam_g is None else lam_g)
+        stats = self.solver.stats()
+        x = np.asarray(sol["x"]).ravel()
+        self.lam_g = np.asarray(sol["lam_g"]).ravel()
+        return x, stats
+
+
+_SOLVERS: dict[int, BackwardNLP] = {}
+
+
+@contextlib.contextmanager
+def quiet_stdout():
+    """Silence the C-level stdout (MUMPS prints 'Entering DMUMPS ... JOB=-2' when a solver is destroyed)."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(devnull)
+
+
+def release_solvers() -> None:
+    """Destroy the cached IPOPT solvers now, without MUMPS's farewell on stdout."""
+    with quiet_stdout():
+        _SOLVERS.clear()
+        gc.collect()
+
+
+def backward_ipopt(model, target, q, u, settings):
+    """Backward problem (8) by the full-space NLP; the answer is re-verified by a Newton solve."""
+    from .backward import FAILED, ITERATION_LIMIT, SOLVED, BackwardResult
+
+    nlp = _SOLVERS.get(id(model))
+    if nlp is None or nlp.model is not model:
+        nlp = _SOLVERS[id(model)] = BackwardNLP(model)
+    with quiet_stdout():
+        x, stats = nlp.solve(target, q, u)
+    q_new, u_new = nlp.pieces.split(x)
+    u_new = np.clip(u_new, model.u_min, model.u_max)  # IPOPT may sit 1e-9 outside its bounds
+    # verify: the same equilibrium test as everywhere else, from IPOPT's answer
+    eq = solve_equilibrium(model, u_new, q0=q, u0=u, guess=q_new)
+    if eq.status != CONVERGED:
+        return BackwardResult(q, u, model.tip(q), FAILED, stats.get("iter_count", 0), 1, eq.factorizations)
+    status = SOLVED if stats.get("success") else ITERATION_LIMIT
+    return BackwardResult(eq.q, u_new, eq.tip, status, stats.get("iter_count", 0), 1, eq.factorizations,
+                          eq.factorization)

@@ -1,0 +1,185 @@
+"""The forward-backward method: Theorem 1, agreement with the forward method, verified points."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from conftest import REPO, small_trunk
+
+from casadi_ws import StaticModel, solve_equilibrium
+from casadi_ws.backward import BackwardSettings, backward
+from casadi_ws.compare import compare
+from casadi_ws.equilibrium import Factorization, factorize
+from casadi_ws.forward import ForwardSettings, forward
+from casadi_ws.forward_backward import FBSettings, forward_backward
+from casadi_ws.interval import NEIGHBOURS, Grid, interval_box, neighbourhood, sensitivity
+
+
+def test_theorem1_box_contains_the_linear_image_and_is_tight(rng):
+    for _ in range(20):
+        n_u = rng.integers(1, 5)
+        A = rng.normal(size=(3, n_u))
+        p = rng.normal(size=3)
+        lo = -rng.uniform(0, 2, n_u)
+        up = rng.uniform(0, 2, n_u)
+        lower, upper = interval_box(A, p, lo, up)
+        samples = p + rng.uniform(lo, up, size=(2000, n_u)) @ A.T
+        assert np.all(samples >= lower - 1e-12) and np.all(samples <= upper + 1e-12)
+        for i in range(3):  # each face is touched by a corner of dU
+            corner_up = np.where(A[i] > 0, up, lo)
+            corner_lo = np.where(A[i] > 0, lo, up)
+            assert np.isclose((p + A @ corner_up)[i], upper[i]) and np.isclose((p + A @ corner_lo)[i], lower[i])
+
+
+def test_theorem1_box_on_the_model_contains_nearby_equilibria():
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    u = np.array([30.0, 30.0])
+    eq = solve_equilibrium(m, u)
+    _, K, _ = m.residual_and_tangent(eq.q, u)
+    A, _ = sensitivity(m, eq.q, Factorization(factorize(K), eq.q))
+    # linearisation against finite differences of the equilibrium map
+    for i in range(2):
+        du = np.zeros(2)
+        du[i] = 0.01
+        ep = solve_equilibrium(m, u + du, q0=eq.q, u0=u, tol=1e-11)
+        em = solve_equilibrium(m, u - du, q0=eq.q, u0=u, tol=1e-11)
+        np.testing.assert_allclose((ep.tip - em.tip) / 0.02, A[:, i], rtol=2e-3, atol=1e-9)
+
+
+def test_neighbourhood_is_the_ring_filtered_by_the_box():
+    assert len(NEIGHBOURS) == 26 and np.all(np.abs(NEIGHBOURS).max(axis=1) == 1)
+    c = np.zeros(3)
+    pts, off = neighbourhood(c, 0.1, np.array([-1, -1, -1.0]), np.array([1, 1, 1.0]))
+    assert len(pts) == 26
+    pts, off = neighbourhood(c, 0.1, np.array([0, -1, -1.0]), np.array([1, 1, 0.0]))
+    assert len(pts) == 2 * 3 * 2 - 1 and np.all(off[:, 0] >= 0) and np.all(off[:, 2] <= 0)
+    g = Grid(np.array([0.1, 0.2, 0.3]), 0.01)
+    k = g.index(np.array([0.1249, 0.2, 0.2951]))
+    assert k == (2, 0, 0) or k == (2, 0, -0)
+    assert g.contains(k, np.array([0.1249, 0.2, 0.3049])) and not g.contains(k, np.array([0.1251, 0.2, 0.3]))
+
+
+def _agreement(model_name, step):
+    pb = small_trunk(model_name, n_cables=2)
+    model = StaticModel(pb)
+    fb = forward_backward(pb, FBSettings(step=step, progress=False), model=model)
+    fw = forward(pb, settings=ForwardSettings(n_d=16, progress=False), model=model)
+    return pb, model, fb, fw, compare(fw, fb)
+
+
+def test_linear_material_fb_agrees_with_forward():
+    # a linear body has no compressive geometric stiffness to offset the cables' own, so its workspace is
+    # only ~8 mm wide: a finer grid
+    _, _, fb, fw, cmp = _agreement("linear", 0.0015)
+    assert fb.n_points > 10
+    assert cmp["coverage"] >= 0.99
+    assert cmp["precision"] >= 0.99
+
+
+def test_nonlinear_trunk_fb_agrees_with_forward_and_its_points_are_equilibria(tmp_path):
+    pb, model, fb, fw, cmp = _agreement("corotational", 0.005)
+    assert fb.counters["iterations"] >= 3 and fb.counters["explored"] >= fb.n_points - 1
+    assert cmp["coverage"] >= 0.95
+    assert cmp["precision"] >= 0.95
+    assert cmp["hausdorff"] < 2 * 0.005
+    # every FB point, re-solved forward at its u, lands where FB said (and its u is inside U)
+    assert np.all(fb.u >= pb.u_min - 1e-12) and np.all(fb.u <= pb.u_max + 1e-12)
+    for u, p in zip(fb.u[::3], fb.points[::3]):
+        eq = solve_equilibrium(model, u)
+        assert eq.converged and np.linalg.norm(eq.tip - p) < 1e-7
+    # each reached point lies in its cell
+    grid = Grid(fb.arrays["grid_origin"], float(fb.arrays["cell_step"]))
+    assert all(grid.contains(tuple(c), p) for c, p in zip(fb.arrays["cells"], fb.points))
+    fb.save(tmp_path)
+    import pyvista as pv
+
+    assert pv.read(tmp_path / "cells.vtu").n_cells == fb.n_points
+
+
+def test_unreachable_target_is_not_reached():
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    eq = solve_equilibrium(m, [0.0, 0.0])
+    target = eq.tip + np.array([-0.01, 0.0, 0.0])  # cables only pull towards +x and +y
+    r = backward(m, target, eq.q, eq.u, scale=0.005)
+    assert r.ok and np.abs(r.tip - target).max() > 0.005
+    np.testing.assert_allclose(r.u[0], 0.0, atol=1e-9)
+
+
+def test_cli_fb_and_compare(tmp_path):
+    text = (REPO / "problems" / "trunk_2cables.yaml").read_text().replace("resolution: 1.0", "resolution: 0.5")
+    prob = tmp_path / "coarse.yaml"
+    prob.write_text(text)
+    run = lambda *a: subprocess.run([sys.executable, "-m", "casadi_ws.cli", *map(str, a)], capture_output=True,
+                                    text=True)
+    r = run("solve", prob, "--method", "fb", "--step", "0.015", "--out", tmp_path / "fb", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "fb" / "cells.vtu").is_file()
+    r = run("solve", prob, "--method", "forward", "--nd", "4", "--out", tmp_path / "fw", "--quiet")
+    assert r.returncode == 0, r.stderr
+    r = run("compare", tmp_path / "fw", tmp_path / "fb", "--plot", tmp_path / "cmp.png")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert {"coverage", "precision", "hausdorff", "volume_a", "volume_b"} <= set(out)
+    assert (tmp_path / "cmp.png").is_file()
+    r = run("solve", prob, "--method", "fb", "--step", "-1", "--out", tmp_path / "x")
+    assert r.returncode == 2 and "--step" in r.stderr
+
+
+def test_full_space_nlp_derivatives_match_finite_differences(rng):
+    from casadi_ws.nlp import FullSpaceNLP
+
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    u = np.array([30.0, 40.0])
+    eq = solve_equilibrium(m, u)
+    P = FullSpaceNLP(m)
+    x0 = np.concatenate([eq.q[m.free], u])
+    lam = rng.normal(size=m.n_free)
+    v = rng.normal(size=P.nx)
+    v[-2:] *= 10
+    h = 1e-7
+
+    def R(x):
+        q, uu = P.split(x)
+        return m.residual(q, uu)
+
+    def grad(x):  # gradient of lam . R
+        q, uu = P.split(x)
+        return P.jacobian(q, uu).T @ lam
+
+    J = P.jacobian(*P.split(x0))
+    fd = (R(x0 + h * v) - R(x0 - h * v)) / (2 * h)
+    assert np.linalg.norm(fd - J @ v) < 1e-6 * np.linalg.norm(fd)
+    H = P.hessian(*P.split(x0), lam, 0.0)
+    fd = (grad(x0 + h * v) - grad(x0 - h * v)) / (2 * h)
+    assert np.linalg.norm(fd - H @ v) < 1e-5 * np.linalg.norm(fd)
+
+
+def test_ipopt_and_reduced_backward_agree():
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    u = np.array([30.0, 40.0])
+    eq = solve_equilibrium(m, u)
+    for d in ([0.002, 0.001, 0.0], [-0.003, 0.002, 0.001], [0.004, -0.002, -0.001]):
+        target = eq.tip + np.array(d)
+        tight = BackwardSettings(formulation="reduced", step_tolerance=1e-6, max_iterations=30)
+        r = backward(m, target, eq.q, u, None, 0.005, tight)
+        i = backward(m, target, eq.q, u, None, 0.005, BackwardSettings(formulation="ipopt"))
+        assert r.ok and i.ok
+        assert np.linalg.norm(r.tip - i.tip) < 2e-6  # metres
+        # both are verified equilibria at their u
+        for res in (r, i):
+            assert np.linalg.norm(solve_equilibrium(m, res.u).tip - res.tip) < 1e-8
+
+
+def test_fb_with_ipopt_backward_runs_and_stays_quiet(capfd):
+    pb = small_trunk("corotational", n_cables=2)
+    s = FBSettings(step=0.012, progress=False, backward=BackwardSettings(formulation="ipopt"))
+    res = forward_backward(pb, s)
+    out = capfd.readouterr().out
+    assert "DMUMPS" not in out
+    assert res.n_points >= 4 and res.counters["backward_solves"] >= res.n_points - 1
