@@ -42,6 +42,10 @@ class BackwardSettings:
     step_tolerance: float = 0.01
     """Stop when the tip moves less than this fraction of the grid step (reduced): whether a cell is
     reached is decided at the scale of the cell, and each further iteration costs an equilibrium."""
+    stop_inside: float | None = 0.45
+    """Reduced: stop as soon as a verified tip lies within this fraction of the step from the target in
+    every coordinate (inside its cell): the workspace needs a point of the cell, not the one closest to
+    its centre. None: always converge to the closest point."""
 
 
 @dataclass
@@ -102,5 +106,7 @@ def _reduced(model, target, q, u, fac, scale, settings) -> BackwardResult:
         if eq.factorization is not None:
             fac = eq.factorization
         if moved < settings.step_tolerance * scale:
+            return BackwardResult(q, u, tip, SOLVED, it, n_eq, n_fac, fac)
+        if settings.stop_inside is not None and np.all(np.abs(tip - target) <= settings.stop_inside * scale):
             return BackwardResult(q, u, tip, SOLVED, it, n_eq, n_fac, fac)
     return BackwardResult(q, u, tip, ITERATION_LIMIT, settings.max_iterations, n_eq, n_fac, fac)

@@ -22,6 +22,7 @@ import numpy as np
 
 from .equilibrium import CONVERGED, OUTSIDE_BOUNDS, Equilibrium, newton_krylov, solve_equilibrium
 from .model import StaticModel
+from .parallel import one_blas_thread, process_pool
 from .result import WorkspaceResult
 
 __all__ = ["ForwardSettings", "forward", "input_grid", "snake_order"]
@@ -161,6 +162,11 @@ def _worker(args):
 def forward(problem, n_d: int | None = None, settings: ForwardSettings | None = None,
             model: StaticModel | None = None) -> WorkspaceResult:
     """Estimate the workspace by the forward method; see :class:`ForwardSettings`."""
+    with one_blas_thread():
+        return _forward(problem, n_d, settings, model)
+
+
+def _forward(problem, n_d, settings, model) -> WorkspaceResult:
     settings = settings or ForwardSettings()
     if n_d is not None:
         settings.n_d = int(n_d)
@@ -201,15 +207,12 @@ def forward(problem, n_d: int | None = None, settings: ForwardSettings | None = 
 
 
 def _parallel(problem, us, settings, workers, bar):
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
-
     # slices of whole grid lines, several per worker so the progress bar moves
     n_line = settings.n_d
     n_lines = max(1, len(us) // n_line)
     pieces = np.array_split(np.arange(len(us)), min(n_lines, 4 * workers))
     results = [None] * len(pieces)
-    with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as ex:
+    with process_pool(workers) as ex:
         futs = {ex.submit(_worker, (problem, us[p], settings)): i for i, p in enumerate(pieces)}
         from concurrent.futures import as_completed
 

@@ -16,7 +16,9 @@ cells; their tips are the reached points (the publication's red points).
 "Reached" means: the backward answer is a verified equilibrium (relative residual below tolerance, u in U)
 whose tip lies within the target's cell, i.e. at most s/2 from the target in each coordinate (the relative
 strategy uses eta/2). A target that is not reached from its first parent is recorded as explored and not
-reached; per (10) it is not tried again.
+reached; per (10) it is not tried again. Failure codes in ``failed_status``: -1 not reached (the closest
+point found lies outside the cell), -2 prefiltered (see ``FBSettings.prefilter``), >= 1 the backward
+solve failed (see :mod:`casadi_ws.backward`).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from .equilibrium import CONVERGED, Factorization, factorize, solve_equilibrium
 from .forward import describe
 from .interval import Grid, interval_box, neighbourhood, sensitivity
 from .model import StaticModel
+from .parallel import one_blas_thread, process_pool
 from .result import WorkspaceResult
 
 __all__ = ["FBSettings", "forward_backward"]
@@ -48,10 +51,18 @@ class FBSettings:
     """Step of the relative strategy as a fraction of ||p|| (the publication's 5 %)."""
     backward: BackwardSettings = field(default_factory=BackwardSettings)
     """How the backward problem (8) is solved."""
+    prefilter: float | None = 0.25
+    """Skip a target when the linearised closest point (bounded least squares with Step 1's A) lies more
+    than (0.5 + prefilter) steps from it in some coordinate, i.e. a quarter cell outside the target's cell
+    by default. Over a one-cell move the linearisation errs by ~s^2 x curvature (~0.04 s on the trunk at
+    s = 4 mm), so such a cell is not reached. Recorded as ``prefiltered``. None: off (the paper's rule)."""
     max_cells: int = 200_000
     """Stop (with a note in the counters) after exploring this many grid points."""
     store_states: bool = False
     """Keep every reached point's nodal displacements."""
+    workers: int = 1
+    """Processes running the backward solves of an iteration in parallel, each with its own model. Cells
+    are claimed before any solve, so the result does not depend on this number."""
     progress: bool = True
     """Print one line per iteration on stderr."""
 
@@ -62,12 +73,56 @@ class _Config:
     p: np.ndarray
     q: np.ndarray
     u: np.ndarray
-    fac: Factorization | None = None
+    A: np.ndarray | None = None  # C K^-1 H^T at this configuration (Step 1)
+    fac: Factorization | None = None  # its LU, when solved in this process
+
+
+def _sensitivity_at(model, q, u, fac):
+    if fac is None:
+        _, K, _ = model.residual_and_tangent(q, u)
+        fac = Factorization(factorize(K), q.copy())
+    return sensitivity(model, q, fac)[0], fac
+
+
+def _expand(model, q, u, fac, targets, scale, bsettings):
+    """Step 3 for one configuration: backward solves of its targets; returns plain data per target."""
+    if fac is None:
+        _, fac = _sensitivity_at(model, q, u, None)
+    out = []
+    for target in targets:
+        res = backward(model, target, q, u, fac, scale, bsettings)
+        A = new_fac = None
+        if res.ok:
+            # a fresh LU at the new configuration: Step 1 there, and its own expansion later. A worker
+            # process recomputes exactly this LU, so results do not depend on the number of workers
+            A, new_fac = _sensitivity_at(model, res.q, res.u, None)
+        out.append((res.q, res.u, res.tip, res.status, res.ok, A, res.equilibrium_solves,
+                    res.factorizations + (new_fac is not None), new_fac))
+    return out
+
+
+_WORKER_MODEL = None
+
+
+def _worker_init(problem):
+    global _WORKER_MODEL
+    _WORKER_MODEL = StaticModel(problem)
+
+
+def _worker_expand(args):
+    q, u, targets, scale, bsettings = args
+    out = _expand(_WORKER_MODEL, q, u, None, targets, scale, bsettings)
+    return [o[:8] + (None,) for o in out]  # LUs do not cross processes
 
 
 def forward_backward(problem, settings: FBSettings | None = None, model: StaticModel | None = None,
                      step: float | None = None) -> WorkspaceResult:
     """Estimate the workspace by Algorithm 1; see :class:`FBSettings`."""
+    with one_blas_thread():
+        return _forward_backward(problem, settings, model, step)
+
+
+def _forward_backward(problem, settings, model, step) -> WorkspaceResult:
     settings = settings or FBSettings()
     if step is not None:
         settings.step = float(step)
@@ -78,7 +133,8 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
     timings = {"build_model": time.perf_counter() - t0, "step1_interval": 0.0, "step2_neighbourhood": 0.0,
                "step3_backward": 0.0}
     counters = dict(iterations=0, explored=0, feasible=0, backward_solves=0, equilibrium_solves=0,
-                    factorizations=0, not_reached=0, backward_failed=0, stopped_at_max_cells=False)
+                    factorizations=0, not_reached=0, prefiltered=0, backward_failed=0,
+                    stopped_at_max_cells=False)
 
     # initial configuration: the equilibrium at u = u_min (U^(0) = U)
     eq = solve_equilibrium(model, model.u_min.copy())
@@ -88,73 +144,90 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
     p0 = eq.tip
     uniform = settings.strategy == "uniform"
     grid = Grid(p0, settings.step) if uniform else None
-    start = _Config(grid.index(p0) if uniform else (0, 0, 0), p0, eq.q, eq.u.copy())
+    A0, fac0 = _sensitivity_at(model, eq.q, eq.u, None)
+    counters["factorizations"] += 1
+    start = _Config(grid.index(p0) if uniform else (0, 0, 0), p0, eq.q, eq.u.copy(), A0, fac0)
 
     reached = [start]  # feasible configurations: W_Es over all iterations
     visited = {start.cell}  # W_E-union: grid points already explored (uniform) ...
     visited_pts = [p0]  # ... or their positions (relative strategy)
     failed_targets, failed_status = [], []
+    pool = _pool(problem, settings.workers) if settings.workers > 1 else None
     frontier = [start]
-    while frontier and counters["explored"] < settings.max_cells:
-        counters["iterations"] += 1
-        new_frontier = []
-        for cfg in frontier:
-            # Step 1: interval over-estimation at cfg, with its input bound (9)
-            t = time.perf_counter()
-            if cfg.fac is None:
-                _, K, _ = model.residual_and_tangent(cfg.q, cfg.u)
-                cfg.fac = Factorization(factorize(K), cfg.q.copy())
-                counters["factorizations"] += 1
-            A, _ = sensitivity(model, cfg.q, cfg.fac)
-            lower, upper = interval_box(A, cfg.p, model.u_min - cfg.u, model.u_max - cfg.u)
-            timings["step1_interval"] += time.perf_counter() - t
+    try:
+        while frontier and counters["explored"] < settings.max_cells:
+            counters["iterations"] += 1
+            tasks = []
+            for cfg in frontier:
+                # Step 1: interval over-estimation at cfg, with its input bound (9)
+                t = time.perf_counter()
+                lower, upper = interval_box(cfg.A, cfg.p, model.u_min - cfg.u, model.u_max - cfg.u)
+                timings["step1_interval"] += time.perf_counter() - t
 
-            # Step 2 (7) and Step 5 (10): neighbours in the box, not yet explored
-            t = time.perf_counter()
-            if uniform:
-                centre, eta = grid.centre(cfg.cell), settings.step
-            else:
-                centre, eta = cfg.p, settings.relative_ratio * float(np.linalg.norm(cfg.p))
-            targets, offsets = neighbourhood(centre, eta, lower, upper)
-            todo = []
-            for target, off in zip(targets, offsets):
-                cell = tuple(np.asarray(cfg.cell) + off) if uniform else None
+                # Step 2 (7) and Step 5 (10): neighbours in the box, not yet explored
+                t = time.perf_counter()
                 if uniform:
-                    if cell in visited:
-                        continue
-                    visited.add(cell)
+                    centre, eta = grid.centre(cfg.cell), settings.step
                 else:
-                    if np.min(np.max(np.abs(np.asarray(visited_pts) - target), axis=1)) < 0.5 * eta:
-                        continue
-                    visited_pts.append(target)
-                todo.append((cell, target))
-            counters["explored"] += len(todo)
-            timings["step2_neighbourhood"] += time.perf_counter() - t
+                    centre, eta = cfg.p, settings.relative_ratio * float(np.linalg.norm(cfg.p))
+                targets, offsets = neighbourhood(centre, eta, lower, upper)
+                todo = []
+                for target, off in zip(targets, offsets):
+                    cell = tuple(np.asarray(cfg.cell) + off) if uniform else (0, 0, 0)
+                    if uniform:
+                        if cell in visited:
+                            continue
+                        visited.add(cell)
+                    else:
+                        if np.min(np.max(np.abs(np.asarray(visited_pts) - target), axis=1)) < 0.5 * eta:
+                            continue
+                        visited_pts.append(target)
+                    counters["explored"] += 1
+                    if settings.prefilter is not None:
+                        gap = np.abs(_linear_closest(cfg.A, cfg.p, cfg.u, model, target) - target).max()
+                        if gap > (0.5 + settings.prefilter) * eta:
+                            counters["prefiltered"] += 1
+                            failed_targets.append(target)
+                            failed_status.append(-2)
+                            continue
+                    todo.append((cell, target))
+                timings["step2_neighbourhood"] += time.perf_counter() - t
+                if todo:
+                    tasks.append((cfg, todo, eta))
 
-            # Step 3: backward problem (8) for each, warm-started from cfg
+            # Step 3: backward problem (8) for each kept target, warm-started from its configuration
             t = time.perf_counter()
-            for cell, target in todo:
-                res = backward(model, target, cfg.q, cfg.u, cfg.fac, eta, settings.backward)
-                counters["backward_solves"] += 1
-                counters["equilibrium_solves"] += res.equilibrium_solves
-                counters["factorizations"] += res.factorizations
-                inside = bool(np.all(np.abs(res.tip - target) <= 0.5 * eta * (1 + 1e-9)))
-                if res.ok and inside:
-                    new = _Config(cell if uniform else (0, 0, 0), res.tip, res.q, res.u, None)
-                    new_frontier.append(new)  # Step 4: carries its bound U^(j) = U - u^(j)
-                    reached.append(new)
-                else:
-                    counters["backward_failed" if not res.ok else "not_reached"] += 1
-                    failed_targets.append(target)
-                    failed_status.append(res.status if not res.ok else -1)
+            if pool is None:
+                outs = [_expand(model, cfg.q, cfg.u, cfg.fac, [tg for _, tg in todo], eta, settings.backward)
+                        for cfg, todo, eta in tasks]
+            else:
+                outs = list(pool.map(_worker_expand, [(cfg.q, cfg.u, [tg for _, tg in todo], eta,
+                                                       settings.backward) for cfg, todo, eta in tasks]))
+            new_frontier = []
+            for (cfg, todo, eta), out in zip(tasks, outs):
+                for (cell, target), (q, u, tip, status, ok, A, n_eq, n_fac, fac) in zip(todo, out):
+                    counters["backward_solves"] += 1
+                    counters["equilibrium_solves"] += n_eq
+                    counters["factorizations"] += n_fac
+                    if ok and np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9)):
+                        new = _Config(cell, tip, q, u, A, fac)  # Step 4: carries its bound U - u
+                        new_frontier.append(new)
+                        reached.append(new)
+                    else:
+                        counters["backward_failed" if not ok else "not_reached"] += 1
+                        failed_targets.append(target)
+                        failed_status.append(status if not ok else -1)
+                cfg.fac = None  # expanded: its factorisation is no longer needed
             timings["step3_backward"] += time.perf_counter() - t
-            cfg.fac = None  # expanded: its factorisation is no longer needed
-        frontier = new_frontier
-        if settings.progress:
-            import sys
+            frontier = new_frontier
+            if settings.progress:
+                import sys
 
-            print(f"forward-backward: iteration {counters['iterations']}: {len(new_frontier)} new cells, "
-                  f"{len(reached)} reached, {counters['explored']} explored", file=sys.stderr)
+                print(f"forward-backward: iteration {counters['iterations']}: {len(new_frontier)} new cells, "
+                      f"{len(reached)} reached, {counters['explored']} explored", file=sys.stderr)
+    finally:
+        if pool is not None:
+            pool.shutdown()
     if settings.backward.formulation == "ipopt":
         from .nlp import release_solvers
 
@@ -176,6 +249,19 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
         states=np.array([c.q for c in reached]) if settings.store_states else None,
         counters=counters, timings=timings, settings=_plain(settings), problem=describe(problem, model),
         rest_tip=model.p0, arrays=arrays)
+
+
+def _pool(problem, workers):
+    return process_pool(workers, _worker_init, (problem,))
+
+
+def _linear_closest(A, p, u, model, target):
+    """Tip of the linearised model closest to target over the remaining input range (bounded LSQ)."""
+    from scipy.optimize import lsq_linear
+
+    lo, hi = model.u_min - u, model.u_max - u
+    du = lsq_linear(A, target - p, bounds=(lo, np.maximum(hi, lo + 1e-300)), method="bvls").x
+    return p + A @ np.clip(du, lo, hi)
 
 
 def _plain(settings: FBSettings) -> dict:
