@@ -65,11 +65,14 @@ class BackwardResult:
 
 
 def backward(model, target, q, u, fac: Factorization | None = None, scale: float = 1e-3,
-             settings: BackwardSettings | None = None) -> BackwardResult:
-    """Solve (8) for ``target`` from the equilibrium (q, u); ``scale`` is a length (the grid step)."""
+             settings: BackwardSettings | None = None, sens=None) -> BackwardResult:
+    """Solve (8) for ``target`` from the equilibrium (q, u); ``scale`` is a length (the grid step).
+
+    ``sens`` = (A, S) at (q, u), if known (see :func:`casadi_ws.interval.sensitivity`), spares an LU.
+    """
     settings = settings or BackwardSettings()
     if settings.formulation == "reduced":
-        return _reduced(model, np.asarray(target, float), q, np.asarray(u, float), fac, scale, settings)
+        return _reduced(model, np.asarray(target, float), q, np.asarray(u, float), fac, scale, settings, sens)
     if settings.formulation == "ipopt":
         from .nlp import backward_ipopt
 
@@ -77,15 +80,15 @@ def backward(model, target, q, u, fac: Factorization | None = None, scale: float
     raise ValueError(f"unknown backward formulation {settings.formulation!r}; expected 'reduced' or 'ipopt'")
 
 
-def _reduced(model, target, q, u, fac, scale, settings) -> BackwardResult:
+def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardResult:
     n_eq = n_fac = 0
-    if fac is None:
+    if fac is None and sens is None:
         _, K, _ = model.residual_and_tangent(q, u)
         fac = Factorization(factorize(K), q.copy())
         n_fac += 1
     tip = model.tip(q)
     for it in range(1, settings.max_iterations + 1):
-        A, S = sensitivity(model, q, fac)
+        A, S = sens if (it == 1 and sens is not None) else sensitivity(model, q, fac)
         # bounded linear least squares for du: min |tip + A du - target|^2, u_min <= u + du <= u_max
         lo, hi = model.u_min - u, model.u_max - u
         hi = np.maximum(hi, lo + 1e-300)  # lsq_linear wants lo < hi; a pinned bound keeps du = 0
@@ -105,6 +108,10 @@ def _reduced(model, target, q, u, fac, scale, settings) -> BackwardResult:
         q, u, tip = eq.q, u_new, eq.tip
         if eq.factorization is not None:
             fac = eq.factorization
+        elif fac is None:  # Newton needed no step and there was no LU yet
+            _, K, _ = model.residual_and_tangent(q, u)
+            fac = Factorization(factorize(K), q.copy())
+            n_fac += 1
         if moved < settings.step_tolerance * scale:
             return BackwardResult(q, u, tip, SOLVED, it, n_eq, n_fac, fac)
         if settings.stop_inside is not None and np.all(np.abs(tip - target) <= settings.stop_inside * scale):

@@ -93,7 +93,8 @@ def cmd_solve(args) -> int:
             raise UsageError(f"--step: expected a grid step > 0 in metres, got {args.step}")
         out = _prepare_out(args.out, args.overwrite)
         settings = FBSettings(step=args.step, strategy=args.strategy, progress=not args.quiet,
-                              backward=BackwardSettings(formulation=args.backward), store_states=args.store_states)
+                              backward=BackwardSettings(formulation=args.backward), store_states=args.store_states,
+                              workers=args.workers)
         result = forward_backward(problem, settings)
     write_outputs(result, problem, out, args.quiet)
     return 0
@@ -145,7 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--method", choices=["forward", "fb"], default="forward",
                    help="forward (grid of U) or fb (forward-backward, grid of the end-effector space)")
     s.add_argument("--nd", type=int, default=11, help="forward: values per actuator (n_d^n_u equilibria)")
-    s.add_argument("--workers", type=int, default=1, help="forward: parallel processes")
+    s.add_argument("--workers", type=int, default=1, help="parallel processes (forward and fb)")
     s.add_argument("--step", type=float, default=0.004, help="fb: grid step s_Ed in metres")
     s.add_argument("--strategy", choices=["uniform", "relative"], default="uniform", help="fb: discretisation")
     s.add_argument("--backward", choices=["reduced", "ipopt"], default="reduced", help="fb: backward solver")

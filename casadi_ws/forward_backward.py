@@ -73,31 +73,31 @@ class _Config:
     p: np.ndarray
     q: np.ndarray
     u: np.ndarray
-    A: np.ndarray | None = None  # C K^-1 H^T at this configuration (Step 1)
-    fac: Factorization | None = None  # its LU, when solved in this process
+    A: np.ndarray  # C K^-1 H^T at this configuration (Step 1)
+    S: np.ndarray | None  # K^-1 H^T: the first Gauss-Newton step of its backward solves
 
 
-def _sensitivity_at(model, q, u, fac):
-    if fac is None:
-        _, K, _ = model.residual_and_tangent(q, u)
-        fac = Factorization(factorize(K), q.copy())
-    return sensitivity(model, q, fac)[0], fac
+def _expand(model, q, u, A, S, targets, scale, bsettings):
+    """Step 3 for one configuration: backward solves of its targets; returns plain data per target.
 
-
-def _expand(model, q, u, fac, targets, scale, bsettings):
-    """Step 3 for one configuration: backward solves of its targets; returns plain data per target."""
-    if fac is None:
-        _, fac = _sensitivity_at(model, q, u, None)
+    The sensitivities of each new configuration come from the backward's last Newton LU (one iterate
+    from the answer: A is ~0.5 % off, far below what the box and the prefilter can notice). They travel
+    with the configuration, so expanding it needs no LU, in this process or in a worker, and the result
+    does not depend on the number of workers.
+    """
     out = []
     for target in targets:
-        res = backward(model, target, q, u, fac, scale, bsettings)
-        A = new_fac = None
+        res = backward(model, target, q, u, None, scale, bsettings, sens=(A, S))
+        A_new = S_new = None
+        n_fac = res.factorizations
         if res.ok:
-            # a fresh LU at the new configuration: Step 1 there, and its own expansion later. A worker
-            # process recomputes exactly this LU, so results do not depend on the number of workers
-            A, new_fac = _sensitivity_at(model, res.q, res.u, None)
-        out.append((res.q, res.u, res.tip, res.status, res.ok, A, res.equilibrium_solves,
-                    res.factorizations + (new_fac is not None), new_fac))
+            fac = res.fac
+            if fac is None:
+                _, K, _ = model.residual_and_tangent(res.q, res.u)
+                fac = Factorization(factorize(K), res.q.copy())
+                n_fac += 1
+            A_new, S_new = sensitivity(model, res.q, fac)
+        out.append((res.q, res.u, res.tip, res.status, res.ok, A_new, S_new, res.equilibrium_solves, n_fac))
     return out
 
 
@@ -110,9 +110,7 @@ def _worker_init(problem):
 
 
 def _worker_expand(args):
-    q, u, targets, scale, bsettings = args
-    out = _expand(_WORKER_MODEL, q, u, None, targets, scale, bsettings)
-    return [o[:8] + (None,) for o in out]  # LUs do not cross processes
+    return _expand(_WORKER_MODEL, *args)
 
 
 def forward_backward(problem, settings: FBSettings | None = None, model: StaticModel | None = None,
@@ -144,9 +142,10 @@ def _forward_backward(problem, settings, model, step) -> WorkspaceResult:
     p0 = eq.tip
     uniform = settings.strategy == "uniform"
     grid = Grid(p0, settings.step) if uniform else None
-    A0, fac0 = _sensitivity_at(model, eq.q, eq.u, None)
+    _, K, _ = model.residual_and_tangent(eq.q, eq.u)
+    A0, S0 = sensitivity(model, eq.q, Factorization(factorize(K), eq.q))
     counters["factorizations"] += 1
-    start = _Config(grid.index(p0) if uniform else (0, 0, 0), p0, eq.q, eq.u.copy(), A0, fac0)
+    start = _Config(grid.index(p0) if uniform else (0, 0, 0), p0, eq.q, eq.u.copy(), A0, S0)
 
     reached = [start]  # feasible configurations: W_Es over all iterations
     visited = {start.cell}  # W_E-union: grid points already explored (uniform) ...
@@ -197,27 +196,24 @@ def _forward_backward(problem, settings, model, step) -> WorkspaceResult:
 
             # Step 3: backward problem (8) for each kept target, warm-started from its configuration
             t = time.perf_counter()
-            if pool is None:
-                outs = [_expand(model, cfg.q, cfg.u, cfg.fac, [tg for _, tg in todo], eta, settings.backward)
-                        for cfg, todo, eta in tasks]
-            else:
-                outs = list(pool.map(_worker_expand, [(cfg.q, cfg.u, [tg for _, tg in todo], eta,
-                                                       settings.backward) for cfg, todo, eta in tasks]))
+            jobs = [(cfg.q, cfg.u, cfg.A, cfg.S, [tg for _, tg in todo], eta, settings.backward)
+                    for cfg, todo, eta in tasks]
+            outs = [_expand(model, *j) for j in jobs] if pool is None else list(pool.map(_worker_expand, jobs))
             new_frontier = []
             for (cfg, todo, eta), out in zip(tasks, outs):
-                for (cell, target), (q, u, tip, status, ok, A, n_eq, n_fac, fac) in zip(todo, out):
+                for (cell, target), (q, u, tip, status, ok, A, S, n_eq, n_fac) in zip(todo, out):
                     counters["backward_solves"] += 1
                     counters["equilibrium_solves"] += n_eq
                     counters["factorizations"] += n_fac
                     if ok and np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9)):
-                        new = _Config(cell, tip, q, u, A, fac)  # Step 4: carries its bound U - u
+                        new = _Config(cell, tip, q, u, A, S)  # Step 4: carries its bound U - u
                         new_frontier.append(new)
                         reached.append(new)
                     else:
                         counters["backward_failed" if not ok else "not_reached"] += 1
                         failed_targets.append(target)
                         failed_status.append(status if not ok else -1)
-                cfg.fac = None  # expanded: its factorisation is no longer needed
+                cfg.S = None  # expanded: no longer needed
             timings["step3_backward"] += time.perf_counter() - t
             frontier = new_frontier
             if settings.progress:

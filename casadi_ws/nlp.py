@@ -13,8 +13,12 @@ model, which assembles them from the compiled per-element functions:
     d2(lam.R)  = sum_e d(K_e^T lam_e)/dq_e  +  sum_c u_c d2(lam . dL_c)/dq2      (q, q)
                  d2L_c lam                                                   (q, u_c)
 
-The same pieces serve every formulation; :class:`FullSpaceNLP` is the one the backward problem (8) of the
-forward-backward method uses, and inverse control can reuse it with other objectives.
+The same pieces (:class:`FullSpaceNLP`) serve every formulation. :class:`TrackingNLP` is the one in use:
+the backward problem (8) of the forward-backward method is its one-point case, and inverse control
+(:mod:`casadi_ws.inverse`) adds points, a regularisation and limits on the change of u. Adding an objective
+term means adding its value and gradient in ``grad_f`` and its Hessian in ``hess_lag``; adding a constraint
+means appending rows to ``g`` and ``jac_g`` and its multiplier's Hessian to ``hess_lag`` (see
+docs/nlp-library.md).
 """
 
 from __future__ import annotations
@@ -33,7 +37,7 @@ from .actuators import cable_third_derivative_function
 from .equilibrium import CONVERGED, solve_equilibrium
 from .jit import ElementBatch
 
-__all__ = ["FullSpaceNLP", "backward_ipopt", "quiet_stdout", "release_solvers"]
+__all__ = ["FullSpaceNLP", "TrackingNLP", "backward_ipopt", "quiet_stdout", "release_solvers"]
 
 IPOPT_OPTIONS = {
     # measured on the backward problem: gradient scaling quadruples the iterations from a warm start
@@ -163,26 +167,59 @@ class _Fn(ca.Callback):
         return self._fn(*[np.asarray(a.full()) for a in arg])
 
 
-class BackwardNLP:
-    """IPOPT solver of the backward problem (8), built once per model and reused with warm starts."""
+class TrackingNLP:
+    """IPOPT over (q, u): min sum_i w_i |p_i(q) - t_i|^2 + rho |u - u_ref|^2 s.t. R(q, u) = 0, u in bounds.
 
-    def __init__(self, model):
+    ``points`` are rest positions of embedded points (default: the end-effector alone); their targets t_i
+    and the reference u_ref are parameters, so one solver serves a whole sequence of targets with warm
+    starts. ``rho`` (m^2/N^2) is a small regularisation preferring low tensions (u_ref = 0) or small
+    changes (u_ref = previous u). Bounds on u can be tightened per solve (e.g. a limit on the change of u).
+    Built once per model: building costs about one Hessian evaluation.
+    """
+
+    def __init__(self, model, points=None, weights=None, rho: float = 0.0):
+        from .mesh import embed
+
         self.model = model
         self.pieces = pieces = FullSpaceNLP(model)
-        nx, nq = pieces.nx, pieces.nq
-        Cf = model.C_free
-        self._CtC = (2.0 * Cf.T @ Cf).tocsc()
+        nx, nq, nu = pieces.nx, pieces.nq, pieces.nu
+        if points is None:
+            Cs = [model.C_free]
+            p0s = [model.p0]
+        else:
+            pts = np.atleast_2d(np.asarray(points, dtype=float))
+            Cs, p0s = [], []
+            for pt in pts:
+                W = embed(model.mesh, pt[None]).matrix(model.mesh).tocsr()
+                Cs.append(W[:, model.free].tocsc())
+                p0s.append(W @ model.X)
+        w = np.ones(len(Cs)) if weights is None else np.asarray(weights, dtype=float)
+        self.n_points = len(Cs)
+        C = sp.vstack(Cs).tocsc()
+        p0 = np.concatenate(p0s)
+        W = np.repeat(w, 3)
+        self._objective_hessian = (2.0 * C.T @ sp.diags(W) @ C).tocsc()
+        self.rho = float(rho)
         dense = ca.Sparsity.dense
+        n_p = 3 * self.n_points + nu
+
+        def parts(x, p):
+            x = np.asarray(x, float).ravel()
+            p = np.asarray(p, float).ravel()
+            qf, u = x[:nq], x[nq:]
+            e = C @ qf + p0 - p[:3 * self.n_points]
+            du = u - p[3 * self.n_points:]
+            return qf, u, e, du
 
         def f_and_g(x, p):
-            q, u = pieces.split(x)
-            e = model.tip(q) - p.ravel()
-            return [ca.DM(float(e @ e)), ca.DM(model.residual(q, u))]
+            qf, u, e, du = parts(x, p)
+            f = float(e @ (W * e)) + self.rho * float(du @ du)
+            return [ca.DM(f), ca.DM(model.residual(model.full(qf), u))]
 
         def grad_f(x, p):
-            q, u = pieces.split(x)
-            e = model.tip(q) - p.ravel()
-            return [ca.DM(float(e @ e)), ca.DM(np.concatenate([2.0 * (Cf.T @ e), np.zeros(pieces.nu)]))]
+            qf, u, e, du = parts(x, p)
+            f = float(e @ (W * e)) + self.rho * float(du @ du)
+            return [ca.DM(f), ca.DM(np.concatenate([2.0 * (C.T @ (W * e)), 2.0 * self.rho * du]))]
 
         def jac_g(x, p):
             q, u = pieces.split(x)
@@ -190,10 +227,13 @@ class BackwardNLP:
 
         def hess_lag(x, p, lam_f, lam_g):
             q, u = pieces.split(x)
-            H = pieces.hessian(q, u, lam_g.ravel(), float(lam_f.ravel()[0]), self._CtC)
+            lf = float(np.asarray(lam_f).ravel()[0])
+            H = pieces.hessian(q, u, np.asarray(lam_g).ravel(), lf, self._objective_hessian)
+            if self.rho and nu:
+                H = H + sp.diags(np.concatenate([np.zeros(nq), np.full(nu, 2.0 * self.rho * lf)]))
             return [pieces.hess_values(sp.triu(H))]
 
-        xs, ps = ("x", dense(nx, 1)), ("p", dense(3, 1))
+        xs, ps = ("x", dense(nx, 1)), ("p", dense(n_p, 1))
         self._cbs = [
             _Fn("nlp", [xs, ps], [("f", dense(1, 1)), ("g", dense(nq, 1))], f_and_g),
             _Fn("grad_f", [xs, ps], [("f", dense(1, 1)), ("grad_f_x", dense(nx, 1))], grad_f),
@@ -202,23 +242,31 @@ class BackwardNLP:
                 [("hess_gamma_x_x", pieces.hess_values.sparsity)], hess_lag),
         ]
         opts = dict(IPOPT_OPTIONS, grad_f=self._cbs[1], jac_g=self._cbs[2], hess_lag=self._cbs[3])
-        self.solver = ca.nlpsol("backward", "ipopt", self._cbs[0], opts)
-        self.lbx = np.concatenate([np.full(nq, -np.inf), model.u_min])
-        self.ubx = np.concatenate([np.full(nq, np.inf), model.u_max])
+        self.solver = ca.nlpsol("tracking", "ipopt", self._cbs[0], opts)
         self.lam_g = np.zeros(nq)
 
-    def solve(self, target, q, u, lam_g=None):
+    def solve(self, targets, q, u, u_ref=None, u_lower=None, u_upper=None):
+        """Warm-started solve; returns (q_full, u, IPOPT stats). ``targets``: (n_points, 3)."""
         m = self.model
-        x0 = np.concatenate([q[m.free], u])
-        sol = self.solver(x0=x0, p=target, lbx=self.lbx, ubx=self.ubx, lbg=0, ubg=0,
-                          lam_g0=self.lam_g if lam_g is None else lam_g)
+        nq = self.pieces.nq
+        lbu = m.u_min if u_lower is None else np.maximum(m.u_min, u_lower)
+        ubu = m.u_max if u_upper is None else np.minimum(m.u_max, u_upper)
+        u0 = np.clip(u, lbu, ubu)
+        p = np.concatenate([np.asarray(targets, float).ravel(),
+                            np.zeros(m.n_u) if u_ref is None else np.asarray(u_ref, float)])
+        with quiet_stdout():
+            sol = self.solver(x0=np.concatenate([q[m.free], u0]), p=p,
+                              lbx=np.concatenate([np.full(nq, -np.inf), lbu]),
+                              ubx=np.concatenate([np.full(nq, np.inf), ubu]), lbg=0, ubg=0, lam_g0=self.lam_g)
         stats = self.solver.stats()
         x = np.asarray(sol["x"]).ravel()
-        self.lam_g = np.asarray(sol["lam_g"]).ravel()
-        return x, stats
+        if stats.get("success"):
+            self.lam_g = np.asarray(sol["lam_g"]).ravel()
+        q_new, u_new = self.pieces.split(x)
+        return q_new, np.clip(u_new, lbu, ubu), stats
 
 
-_SOLVERS: dict[int, BackwardNLP] = {}
+_SOLVERS: dict[int, TrackingNLP] = {}
 
 
 @contextlib.contextmanager
@@ -249,11 +297,8 @@ def backward_ipopt(model, target, q, u, settings):
 
     nlp = _SOLVERS.get(id(model))
     if nlp is None or nlp.model is not model:
-        nlp = _SOLVERS[id(model)] = BackwardNLP(model)
-    with quiet_stdout():
-        x, stats = nlp.solve(target, q, u)
-    q_new, u_new = nlp.pieces.split(x)
-    u_new = np.clip(u_new, model.u_min, model.u_max)  # IPOPT may sit 1e-9 outside its bounds
+        nlp = _SOLVERS[id(model)] = TrackingNLP(model)
+    q_new, u_new, stats = nlp.solve(np.asarray(target)[None], q, u)
     # verify: the same equilibrium test as everywhere else, from IPOPT's answer
     eq = solve_equilibrium(model, u_new, q0=q, u0=u, guess=q_new)
     if eq.status != CONVERGED:

@@ -166,7 +166,7 @@ def test_ipopt_and_reduced_backward_agree():
     eq = solve_equilibrium(m, u)
     for d in ([0.002, 0.001, 0.0], [-0.003, 0.002, 0.001], [0.004, -0.002, -0.001]):
         target = eq.tip + np.array(d)
-        tight = BackwardSettings(formulation="reduced", step_tolerance=1e-6, max_iterations=30)
+        tight = BackwardSettings(formulation="reduced", step_tolerance=1e-6, max_iterations=30, stop_inside=None)
         r = backward(m, target, eq.q, u, None, 0.005, tight)
         i = backward(m, target, eq.q, u, None, 0.005, BackwardSettings(formulation="ipopt"))
         assert r.ok and i.ok
@@ -183,3 +183,12 @@ def test_fb_with_ipopt_backward_runs_and_stays_quiet(capfd):
     out = capfd.readouterr().out
     assert "DMUMPS" not in out
     assert res.n_points >= 4 and res.counters["backward_solves"] >= res.n_points - 1
+
+
+def test_fb_result_does_not_depend_on_the_number_of_workers():
+    pb = small_trunk("corotational", n_cables=2)
+    one = forward_backward(pb, FBSettings(step=0.008, progress=False))
+    two = forward_backward(pb, FBSettings(step=0.008, progress=False, workers=2))
+    assert one.counters == two.counters
+    np.testing.assert_array_equal(one.arrays["cells"], two.arrays["cells"])
+    assert np.abs(one.points - two.points).max() < 1e-12
