@@ -1,4 +1,4 @@
-"""Command line: ``casadi-ws equilibrium|solve|compare|demo ...``.
+"""Command line: ``casadi-ws equilibrium|solve|compare|reach|follow|demo ...``.
 
 Exit codes: 0 success, 1 a solve did not converge (equilibrium), 2 bad input (problem file, arguments).
 Bad input prints one line naming the file and key; ``--debug`` shows the Python traceback instead.
@@ -51,12 +51,40 @@ def cmd_equilibrium(args) -> int:
     return 0 if eq.converged else 1
 
 
-def _prepare_out(path: str, overwrite: bool) -> Path:
+def _prepare_out(path: str, overwrite: bool, resume: bool = False) -> Path:
+    from .checkpoint import CHECKPOINT
+
     out = Path(path)
+    if resume:
+        if overwrite:
+            raise UsageError("--resume and --overwrite contradict each other")
+        if not (out / CHECKPOINT).is_file():
+            done = (out / "summary.json").is_file()
+            raise UsageError(f"--resume: {out} has no checkpoint" + (" (the run there is complete)" if done else ""))
+        return out
     if out.exists() and any(out.iterdir()) and not overwrite:
-        raise UsageError(f"--out: {out} already holds files; pass --overwrite to replace them")
+        raise UsageError(f"--out: {out} already holds files; pass --overwrite to replace them or --resume to "
+                         f"continue an interrupted run")
+    if out.exists() and overwrite:
+        (out / CHECKPOINT).unlink(missing_ok=True)
     out.mkdir(parents=True, exist_ok=True)
     return out
+
+
+# A forward-backward grid finer than this many cells over the robot's reach needs --force.
+MAX_CELLS = 200_000
+
+
+def _check_step(problem, step: float, force: bool) -> None:
+    """Refuse a grid step so small that the exploration could not finish in reasonable time."""
+    if not step > 0 or not np.isfinite(step):
+        raise UsageError(f"--step: expected a grid step > 0 in metres, got {step}")
+    # the tip stays within the robot's size of where it starts: a ball bounds the cells that can be reached
+    reach = problem.mesh.characteristic_length()
+    cells = 4.0 / 3.0 * np.pi * reach**3 / step**3
+    if cells > MAX_CELLS and not force:
+        raise UsageError(f"--step: {step} m could mean up to {cells:.3g} grid cells within the robot's reach "
+                         f"({reach:.3g} m), more than {MAX_CELLS}; use a larger step or pass --force")
 
 
 def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
@@ -66,6 +94,8 @@ def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
     result.save(out)
     three_views(result, out / "three_views.png", problem.mesh, title=f"{problem.name}: {result.method} workspace")
     workspace_3d(result, out / "workspace_3d.png", problem.mesh, title=f"{problem.name}: {result.method}")
+    for w in result.warnings():
+        print(f"casadi-ws: warning: {w}", file=sys.stderr)
     if not quiet:
         s = result.summary()
         print(f"{result.method}: {s['n_points']} reachable points, {s['n_failed']} failed, {s['time_s']:.1f} s")
@@ -74,28 +104,45 @@ def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
               f"three_views.png workspace_3d.png")
 
 
+_SOLVE_DEFAULTS = {"method": "forward", "nd": 11, "step": 0.004, "strategy": "uniform", "backward": "reduced",
+                   "workers": 1}
+
+
 def cmd_solve(args) -> int:
     problem = _load(args.problem)
+    for key, default in _SOLVE_DEFAULTS.items():  # command line, else the file's workspace section, else default
+        if getattr(args, key) is None:
+            setattr(args, key, problem.workspace.get(key, default))
+    if args.workers < 1:
+        raise UsageError(f"--workers: expected an integer >= 1, got {args.workers}")
     if args.method == "forward":
         from .forward import ForwardSettings, forward
 
         if args.nd < 1:
             raise UsageError(f"--nd: expected an integer >= 1, got {args.nd}")
-        out = _prepare_out(args.out, args.overwrite)
+        if args.nd ** problem.n_u > 10**8 and not args.force:
+            raise UsageError(f"--nd: {args.nd}^{problem.n_u} = {args.nd ** problem.n_u:.3g} equilibria; "
+                             f"pass --force to run that many")
+        out = _prepare_out(args.out, args.overwrite, args.resume)
         settings = ForwardSettings(n_d=args.nd, workers=args.workers, progress=not args.quiet,
-                                   store_states=args.store_states)
-        result = forward(problem, settings=settings)
+                                   store_states=args.store_states, checkpoint_every=args.checkpoint_every)
+        run = lambda: forward(problem, settings=settings, checkpoint_dir=out, resume=args.resume)  # noqa: E731
     else:
         from .backward import BackwardSettings
         from .forward_backward import FBSettings, forward_backward
 
-        if not args.step > 0:
-            raise UsageError(f"--step: expected a grid step > 0 in metres, got {args.step}")
-        out = _prepare_out(args.out, args.overwrite)
+        _check_step(problem, args.step, args.force)
+        out = _prepare_out(args.out, args.overwrite, args.resume)
         settings = FBSettings(step=args.step, strategy=args.strategy, progress=not args.quiet,
                               backward=BackwardSettings(formulation=args.backward), store_states=args.store_states,
                               workers=args.workers)
-        result = forward_backward(problem, settings)
+        run = lambda: forward_backward(problem, settings, checkpoint_dir=out, resume=args.resume)  # noqa: E731
+    try:
+        result = run()
+    except KeyboardInterrupt:
+        print(f"casadi-ws: interrupted; the checkpoint in {out} continues with the same command and --resume",
+              file=sys.stderr)
+        return 130
     write_outputs(result, problem, out, args.quiet)
     return 0
 
@@ -114,6 +161,69 @@ def cmd_compare(args) -> int:
     print(json.dumps(report, indent=2))
     if args.plot:
         three_views(results, args.plot, title="forward (blue) vs forward-backward (gray cells, red points)")
+    return 0
+
+
+def _parse_point(text: str, flag: str) -> np.ndarray:
+    try:
+        v = np.array([float(x) for x in text.split(",")])
+    except ValueError:
+        raise UsageError(f"{flag}: expected x,y,z in metres, got {text!r}") from None
+    if v.size != 3 or not np.all(np.isfinite(v)):
+        raise UsageError(f"{flag}: expected three finite numbers x,y,z in metres, got {text!r}")
+    return v
+
+
+def _reach_settings(args):
+    from .inverse import ReachSettings
+
+    if args.max_du is not None and not args.max_du > 0:
+        raise UsageError(f"--max-du: expected a positive number of newtons, got {args.max_du}")
+    if not args.regularization >= 0:
+        raise UsageError(f"--regularization: expected >= 0, got {args.regularization}")
+    return ReachSettings(tolerance=args.tolerance, regularization=args.regularization, max_du=args.max_du)
+
+
+def cmd_reach(args) -> int:
+    from .inverse import reach
+
+    problem = _load(args.problem)
+    target = _parse_point(args.target, "--target")
+    r = reach(problem, target, settings=_reach_settings(args))
+    print(json.dumps({"problem": problem.name, "target": target.tolist(), **r.to_dict()},
+                     indent=None if args.compact else 2))
+    return 0
+
+
+def cmd_follow(args) -> int:
+    from .inverse import follow
+    from .plots import three_views
+    from .result import WorkspaceResult
+
+    problem = _load(args.problem)
+    path = Path(args.targets)
+    if not path.is_file():
+        raise UsageError(f"--targets: {path}: file not found")
+    rows = [ln for ln in path.read_text().splitlines() if ln.strip()]
+    try:
+        [float(x) for x in rows[0].split(",")]
+    except (ValueError, IndexError):
+        rows = rows[1:]  # a header line (or nothing)
+    try:
+        targets = np.array([[float(x) for x in ln.split(",")] for ln in rows])
+    except ValueError as exc:
+        raise UsageError(f"--targets: {path}: expected lines 'x,y,z' in metres ({exc})") from None
+    if targets.ndim != 2 or targets.shape[1] != 3 or len(targets) == 0 or not np.all(np.isfinite(targets)):
+        raise UsageError(f"--targets: {path}: expected one or more lines 'x,y,z' in metres")
+    out = _prepare_out(args.out, args.overwrite)
+    res = follow(problem, targets, _reach_settings(args))
+    res.save_csv(out / "follow.csv")
+    rest = np.asarray(problem.end_effector, float)
+    views = [WorkspaceResult("targets", res.targets, np.zeros((len(targets), 0)), rest_tip=rest),
+             WorkspaceResult("reached tips", res.tips, res.u, rest_tip=rest)]
+    three_views(views, out / "three_views.png", problem.mesh, title=f"{problem.name}: targets vs reached tips")
+    print(f"follow: {int(res.reachable.sum())}/{len(targets)} targets reached, largest error "
+          f"{res.errors.max():.3g} m; wrote {out}/follow.csv and three_views.png")
     return 0
 
 
@@ -143,18 +253,40 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("solve", help="estimate the reachable workspace and write result files and plots")
     s.add_argument("problem", help="problem YAML file")
-    s.add_argument("--method", choices=["forward", "fb"], default="forward",
-                   help="forward (grid of U) or fb (forward-backward, grid of the end-effector space)")
-    s.add_argument("--nd", type=int, default=11, help="forward: values per actuator (n_d^n_u equilibria)")
-    s.add_argument("--workers", type=int, default=1, help="parallel processes (forward and fb)")
-    s.add_argument("--step", type=float, default=0.004, help="fb: grid step s_Ed in metres")
-    s.add_argument("--strategy", choices=["uniform", "relative"], default="uniform", help="fb: discretisation")
-    s.add_argument("--backward", choices=["reduced", "ipopt"], default="reduced", help="fb: backward solver")
+    s.add_argument("--method", choices=["forward", "fb"], default=None,
+                   help="forward (grid of U; the default) or fb (forward-backward, grid of the end-effector space)")
+    s.add_argument("--nd", type=int, default=None, help="forward: values per actuator, n_d^n_u equilibria (11)")
+    s.add_argument("--workers", type=int, default=None, help="parallel processes, forward and fb (1)")
+    s.add_argument("--step", type=float, default=None, help="fb: grid step s_Ed in metres (0.004)")
+    s.add_argument("--strategy", choices=["uniform", "relative"], default=None, help="fb: discretisation (uniform)")
+    s.add_argument("--backward", choices=["reduced", "ipopt"], default=None, help="fb: backward solver (reduced)")
     s.add_argument("--out", required=True, help="output directory")
     s.add_argument("--overwrite", action="store_true", help="replace the files of an existing output directory")
     s.add_argument("--store-states", action="store_true", help="keep every point's nodal displacements")
+    s.add_argument("--resume", action="store_true", help="continue the interrupted run whose checkpoint is in --out")
+    s.add_argument("--checkpoint-every", type=float, default=30.0,
+                   help="forward: seconds between checkpoints (forward-backward: every iteration)")
+    s.add_argument("--force", action="store_true", help="run even a grid this large")
     s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     s.set_defaults(func=cmd_solve)
+
+    for name, helptext in (("reach", "cable tensions that bring the tip to a target (inverse model)"),
+                           ("follow", "reach a sequence of targets from a CSV file, each warm-started")):
+        r = sub.add_parser(name, help=helptext)
+        r.add_argument("problem", help="problem YAML file")
+        if name == "reach":
+            r.add_argument("--target", required=True, help="x,y,z in metres")
+            r.add_argument("--compact", action="store_true", help="print the JSON on one line")
+            r.set_defaults(func=cmd_reach)
+        else:
+            r.add_argument("--targets", required=True, help="CSV file of x,y,z rows in metres (header optional)")
+            r.add_argument("--out", required=True, help="output directory")
+            r.add_argument("--overwrite", action="store_true", help="replace the files of an existing directory")
+            r.set_defaults(func=cmd_follow)
+        r.add_argument("--tolerance", type=float, default=1e-6, help="reachable if within this distance (m)")
+        r.add_argument("--regularization", type=float, default=0.0,
+                       help="weight (m^2/N^2) of |u|^2 (reach) or |u - u_previous|^2 (follow)")
+        r.add_argument("--max-du", type=float, default=None, help="largest change of each tension per solve (N)")
 
     c = sub.add_parser("compare", help="agreement of two result directories (coverage, precision, Hausdorff)")
     c.add_argument("a", help="result directory A (e.g. forward)")

@@ -16,10 +16,12 @@ verified equilibrium, by continuation if needed.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
+from .checkpoint import CHECKPOINT, fingerprint, load_checkpoint, save_checkpoint
 from .equilibrium import CONVERGED, OUTSIDE_BOUNDS, Equilibrium, newton_krylov, solve_equilibrium
 from .model import StaticModel
 from .parallel import one_blas_thread, process_pool
@@ -50,6 +52,8 @@ class ForwardSettings:
     """Show a progress bar on stderr for runs longer than a moment."""
     tol: float | None = None
     """Relative residual tolerance; default: the problem's ``solver.tolerance``."""
+    checkpoint_every: float = 30.0
+    """Seconds between checkpoints when the run has an output directory (see :func:`forward`)."""
     max_iter: int | None = None
     """Newton iterations per point; default: the problem's ``solver.max_iterations``."""
 
@@ -100,8 +104,57 @@ def _predict(model, history, u, fac, mode):
     return q
 
 
-def _sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, start=None, progress=None):
-    """Solve the equilibria at ``us`` in order; returns per-point arrays and counters."""
+@dataclass
+class _Sweep:
+    """What carries from one point of the sweep to the next."""
+
+    history: list = field(default_factory=list)  # verified (u, q) since the last failure, newest last (<= 3)
+    fac: object = None  # the last LU, for the tangent predictor at turns
+    start: tuple | None = None  # the last verified (q, u), for continuation after a failure
+
+
+def _solve_point(model, u, j, settings, tol, sw: _Sweep, counters):
+    """Solve one point of the sweep from what ``sw`` carries; updates ``sw`` and ``counters``."""
+    if sw.history:
+        guess = _predict(model, sw.history, u, sw.fac, settings.predictor)
+        u0, q0 = sw.history[-1]
+        nk = newton_krylov(model, u, guess, sw.fac, tol) if (settings.krylov and sw.fac is not None) else None
+        if nk is not None:
+            q_nk, rel, n_kry = nk
+            counters["krylov_iterations"] += n_kry
+            inside = np.all(u >= model.u_min - 1e-12) and np.all(u <= model.u_max + 1e-12)
+            eq = Equilibrium(q_nk, u.copy(), model.tip(q_nk), CONVERGED if inside else OUTSIDE_BOUNDS, 1, 0,
+                             rel, 0, sw.fac)
+        else:
+            eq = solve_equilibrium(model, u, q0=q0, u0=u0, guess=guess,
+                                   fac=sw.fac if settings.reuse_factorization else None,
+                                   tol=settings.tol, max_iter=settings.max_iter)
+    else:
+        if j > 0:
+            counters["restarts"] += 1
+        q0, u0 = (None, None) if sw.start is None else sw.start
+        eq = solve_equilibrium(model, u, q0=q0, u0=u0, tol=settings.tol, max_iter=settings.max_iter)
+    counters["solves"] += 1
+    counters["newton_iterations"] += eq.iterations
+    counters["factorizations"] += eq.factorizations
+    counters["load_steps"] += eq.load_steps
+    if eq.status == CONVERGED:
+        sw.history = (sw.history + [(u.copy(), eq.q)])[-3:]
+        sw.fac = eq.factorization
+        sw.start = (eq.q, u.copy())
+    else:
+        sw.history = []  # next point: continuation from the last verified equilibrium
+        sw.fac = None
+    return eq
+
+
+def _sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progress=None,
+           resume: dict | None = None, checkpoint=None):
+    """Solve the equilibria at ``us`` in order; returns per-point arrays and counters.
+
+    ``checkpoint`` (if given) is called with the sweep's state every ``settings.checkpoint_every`` seconds
+    and on Ctrl-C; passing such a state back as ``resume`` continues where it stopped.
+    """
     n = len(us)
     tips = np.full((n, 3), np.nan)
     status = np.zeros(n, dtype=int)
@@ -110,46 +163,47 @@ def _sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, start=
     counters = dict(solves=0, newton_iterations=0, factorizations=0, load_steps=0, restarts=0,
                     krylov_iterations=0)
     tol = model.problem.solver.tolerance if settings.tol is None else settings.tol
-    history = []  # verified (u, q) since the last failure, newest last (at most 3 kept)
-    fac = None
-    for j, u in enumerate(us):
-        if history:
-            guess = _predict(model, history, u, fac, settings.predictor)
-            u0, q0 = history[-1]
-            nk = None
-            if settings.krylov and fac is not None:
-                nk = newton_krylov(model, u, guess, fac, tol)
-            if nk is not None:
-                q_nk, rel, n_kry = nk
-                counters["krylov_iterations"] += n_kry
-                eq = Equilibrium(q_nk, u.copy(), model.tip(q_nk), CONVERGED, 1, 0, rel, 0, fac)
-                if np.any(u < model.u_min - 1e-12) or np.any(u > model.u_max + 1e-12):
-                    eq.status = OUTSIDE_BOUNDS
-            else:
-                eq = solve_equilibrium(model, u, q0=q0, u0=u0, guess=guess,
-                                       fac=fac if settings.reuse_factorization else None,
-                                       tol=settings.tol, max_iter=settings.max_iter)
-        else:
-            if j > 0:
-                counters["restarts"] += 1
-            q0, u0 = (None, None) if start is None else start
-            eq = solve_equilibrium(model, u, q0=q0, u0=u0, tol=settings.tol, max_iter=settings.max_iter)
-        counters["solves"] += 1
-        counters["newton_iterations"] += eq.iterations
-        counters["factorizations"] += eq.factorizations
-        counters["load_steps"] += eq.load_steps
-        tips[j], status[j], residual[j] = eq.tip, eq.status, eq.residual
-        if eq.status == CONVERGED:
-            history = (history + [(u.copy(), eq.q)])[-3:]
-            fac = eq.factorization
-            start = (eq.q, u.copy())
-            if states is not None:
-                states[j] = eq.q
-        else:
-            history = []  # next point: continuation from the last verified equilibrium
-            fac = None
+    sw = _Sweep()
+    first = 0
+    if resume is not None:
+        first = int(resume["next"])
+        tips[:first], status[:first], residual[:first] = resume["tips"], resume["status"], resume["residual"]
+        if states is not None:
+            states[:first] = resume["states"]
+        counters.update(resume["counters"])
+        sw.history = list(zip(resume["hist_u"], resume["hist_q"]))
+        if len(resume["start_q"]):
+            sw.start = (resume["start_q"], resume["start_u"])
         if progress is not None:
-            progress(1)
+            progress(first)
+
+    def state(nxt):
+        st = dict(next=nxt, tips=tips[:nxt], status=status[:nxt], residual=residual[:nxt],
+                  counters=dict(counters), hist_u=np.array([h[0] for h in sw.history]).reshape(len(sw.history), -1),
+                  hist_q=np.array([h[1] for h in sw.history]).reshape(len(sw.history), -1),
+                  start_q=np.zeros(0) if sw.start is None else sw.start[0],
+                  start_u=np.zeros(0) if sw.start is None else sw.start[1])
+        if states is not None:
+            st["states"] = states[:nxt]
+        return st
+
+    last_save = time.perf_counter()
+    j = first
+    try:
+        for j in range(first, n):
+            eq = _solve_point(model, us[j], j, settings, tol, sw, counters)
+            tips[j], status[j], residual[j] = eq.tip, eq.status, eq.residual
+            if states is not None and eq.status == CONVERGED:
+                states[j] = eq.q
+            if progress is not None:
+                progress(1)
+            if checkpoint is not None and time.perf_counter() - last_save > settings.checkpoint_every:
+                checkpoint(state(j + 1))
+                last_save = time.perf_counter()
+    except KeyboardInterrupt:
+        if checkpoint is not None:
+            checkpoint(state(j))  # point j was not finished: it is solved again on resume
+        raise
     return tips, status, residual, states, counters
 
 
@@ -160,13 +214,17 @@ def _worker(args):
 
 
 def forward(problem, n_d: int | None = None, settings: ForwardSettings | None = None,
-            model: StaticModel | None = None) -> WorkspaceResult:
-    """Estimate the workspace by the forward method; see :class:`ForwardSettings`."""
+            model: StaticModel | None = None, checkpoint_dir=None, resume: bool = False) -> WorkspaceResult:
+    """Estimate the workspace by the forward method; see :class:`ForwardSettings`.
+
+    With ``checkpoint_dir``, the run saves a checkpoint there every ``settings.checkpoint_every`` seconds
+    and when interrupted (Ctrl-C); ``resume=True`` continues from it (see :mod:`casadi_ws.checkpoint`).
+    """
     with one_blas_thread():
-        return _forward(problem, n_d, settings, model)
+        return _forward(problem, n_d, settings, model, checkpoint_dir, resume)
 
 
-def _forward(problem, n_d, settings, model) -> WorkspaceResult:
+def _forward(problem, n_d, settings, model, checkpoint_dir=None, resume=False) -> WorkspaceResult:
     settings = settings or ForwardSettings()
     if n_d is not None:
         settings.n_d = int(n_d)
@@ -185,14 +243,43 @@ def _forward(problem, n_d, settings, model) -> WorkspaceResult:
         bar = tqdm(total=n, desc="forward", unit="pt", mininterval=0.5, leave=False)
     t1 = time.perf_counter()
     workers = max(1, min(int(settings.workers), n // 50 or 1))
-    if workers == 1:
-        tips, status, residual, states, counters = _sweep(model, us, settings,
-                                                          progress=bar.update if bar else None)
-    else:
-        tips, status, residual, states, counters = _parallel(problem, us, settings, workers, bar)
+    fp = fingerprint("forward", model, {k: getattr(settings, k) for k in
+                                        ("n_d", "predictor", "reuse_factorization", "krylov", "tol", "max_iter",
+                                         "store_states")} | {"workers": workers})
+    saved_meta, saved = ({}, None)
+    if resume:
+        if checkpoint_dir is None:
+            raise ValueError("resume needs the checkpoint directory")
+        saved_meta, saved = load_checkpoint(checkpoint_dir, fp)
+    previous = float(saved_meta.get("elapsed", 0.0))
+
+    def save(meta, arrays):
+        if checkpoint_dir is not None:
+            save_checkpoint(checkpoint_dir, {"fingerprint": fp, "method": "forward",
+                                             "elapsed": previous + time.perf_counter() - t0, **meta}, arrays)
+
+    try:
+        if workers == 1:
+            resume_state = None
+            if saved is not None:
+                resume_state = dict(saved, next=saved_meta["next"], counters=saved_meta["counters"])
+
+            def checkpoint(st):
+                save({"next": st["next"], "counters": st["counters"]},
+                     {k: v for k, v in st.items() if k not in ("next", "counters")})
+
+            tips, status, residual, states, counters = _sweep(
+                model, us, settings, progress=bar.update if bar else None, resume=resume_state,
+                checkpoint=checkpoint if checkpoint_dir is not None else None)
+        else:
+            tips, status, residual, states, counters = _parallel(problem, us, settings, workers, bar,
+                                                                 saved_meta, saved, save)
+    finally:
+        if bar is not None:
+            bar.close()
     t_sweep = time.perf_counter() - t1
-    if bar is not None:
-        bar.close()
+    if checkpoint_dir is not None:
+        (Path(checkpoint_dir) / CHECKPOINT).unlink(missing_ok=True)  # complete: the result files replace it
 
     ok = status == CONVERGED
     rest = model.p0
@@ -200,26 +287,48 @@ def _forward(problem, n_d, settings, model) -> WorkspaceResult:
     result = WorkspaceResult(
         method="forward", points=tips[ok], u=us[ok], failed_u=us[~ok], failed_status=status[~ok],
         failed_residual=residual[~ok], states=states[ok] if states is not None else None, counters=counters,
-        timings={"build_model": t_model, "sweep": t_sweep, "total": time.perf_counter() - t0,
-                 "per_point": t_sweep / n},
+        timings={"build_model": t_model, "sweep": t_sweep, "total": time.perf_counter() - t0 + previous,
+                 "per_point": t_sweep / n, "before_resume": previous},
         settings={**asdict(settings), "workers": workers}, problem=describe(problem, model), rest_tip=rest)
     return result
 
 
-def _parallel(problem, us, settings, workers, bar):
-    # slices of whole grid lines, several per worker so the progress bar moves
-    n_line = settings.n_d
-    n_lines = max(1, len(us) // n_line)
+def _parallel(problem, us, settings, workers, bar, saved_meta, saved, save):
+    """Slices of whole grid lines, several per worker; each completed slice is checkpointed."""
+    from concurrent.futures import as_completed
+
+    n_lines = max(1, len(us) // settings.n_d)
     pieces = np.array_split(np.arange(len(us)), min(n_lines, 4 * workers))
     results = [None] * len(pieces)
-    with process_pool(workers) as ex:
-        futs = {ex.submit(_worker, (problem, us[p], settings)): i for i, p in enumerate(pieces)}
-        from concurrent.futures import as_completed
+    piece_counters = {int(k): v for k, v in saved_meta.get("pieces", {}).items()}
+    for i in piece_counters:
+        results[i] = (saved[f"tips_{i}"], saved[f"status_{i}"], saved[f"residual_{i}"],
+                      saved.get(f"states_{i}"), piece_counters[i])
+        if bar is not None:
+            bar.update(len(pieces[i]))
 
-        for f in as_completed(futs):
-            results[futs[f]] = f.result()
-            if bar is not None:
-                bar.update(len(pieces[futs[f]]))
+    def checkpoint():
+        arrays = {}
+        for i, r in enumerate(results):
+            if r is not None:
+                arrays.update({f"tips_{i}": r[0], f"status_{i}": r[1], f"residual_{i}": r[2]})
+                if r[3] is not None:
+                    arrays[f"states_{i}"] = r[3]
+        save({"pieces": {i: r[4] for i, r in enumerate(results) if r is not None}}, arrays)
+
+    with process_pool(workers) as ex:
+        futs = {ex.submit(_worker, (problem, us[p], settings)): i for i, p in enumerate(pieces)
+                if results[i] is None}
+        try:
+            for f in as_completed(futs):
+                results[futs[f]] = f.result()
+                checkpoint()
+                if bar is not None:
+                    bar.update(len(pieces[futs[f]]))
+        except KeyboardInterrupt:
+            for f in futs:
+                f.cancel()
+            raise
     tips = np.vstack([r[0] for r in results])
     status = np.concatenate([r[1] for r in results])
     residual = np.concatenate([r[2] for r in results])

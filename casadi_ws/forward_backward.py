@@ -25,10 +25,12 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from .backward import BackwardSettings, backward
+from .checkpoint import CHECKPOINT, fingerprint, load_checkpoint, save_checkpoint
 from .equilibrium import CONVERGED, Factorization, factorize, solve_equilibrium
 from .forward import describe
 from .interval import Grid, interval_box, neighbourhood, sensitivity
@@ -114,13 +116,17 @@ def _worker_expand(args):
 
 
 def forward_backward(problem, settings: FBSettings | None = None, model: StaticModel | None = None,
-                     step: float | None = None) -> WorkspaceResult:
-    """Estimate the workspace by Algorithm 1; see :class:`FBSettings`."""
+                     step: float | None = None, checkpoint_dir=None, resume: bool = False) -> WorkspaceResult:
+    """Estimate the workspace by Algorithm 1; see :class:`FBSettings`.
+
+    With ``checkpoint_dir``, a checkpoint is saved there after every iteration; ``resume=True`` continues
+    from it and ends with the same result as an uninterrupted run.
+    """
     with one_blas_thread():
-        return _forward_backward(problem, settings, model, step)
+        return _forward_backward(problem, settings, model, step, checkpoint_dir, resume)
 
 
-def _forward_backward(problem, settings, model, step) -> WorkspaceResult:
+def _forward_backward(problem, settings, model, step, checkpoint_dir=None, resume=False) -> WorkspaceResult:
     settings = settings or FBSettings()
     if step is not None:
         settings.step = float(step)
@@ -151,8 +157,52 @@ def _forward_backward(problem, settings, model, step) -> WorkspaceResult:
     visited = {start.cell}  # W_E-union: grid points already explored (uniform) ...
     visited_pts = [p0]  # ... or their positions (relative strategy)
     failed_targets, failed_status = [], []
-    pool = _pool(problem, settings.workers) if settings.workers > 1 else None
     frontier = [start]
+
+    # checkpoints at iteration boundaries, where the state is complete and the run deterministic
+    fp = fingerprint("forward-backward", model, _plain(settings) | {"workers": None, "progress": None})
+    previous = 0.0
+    if resume:
+        if checkpoint_dir is None:
+            raise ValueError("resume needs the checkpoint directory")
+        meta, a = load_checkpoint(checkpoint_dir, fp)
+        previous = float(meta["elapsed"])
+        counters.update(meta["counters"])
+        timings.update({k: v for k, v in meta["timings"].items() if k.startswith("step")})
+        fset = set(int(i) for i in a["frontier"])
+        reached = []
+        for i in range(len(a["cells"])):
+            f = i in fset
+            k = int(np.searchsorted(a["frontier"], i)) if f else -1
+            reached.append(_Config(tuple(int(c) for c in a["cells"][i]), a["p"][i],
+                                   a["frontier_q"][k] if f else (a["q"][i] if "q" in a else None), a["u"][i],
+                                   a["frontier_A"][k] if f else None, a["frontier_S"][k] if f else None))
+        frontier = [reached[i] for i in sorted(fset)]
+        visited = {tuple(int(c) for c in v) for v in a["visited"]}
+        visited_pts = list(a["visited_pts"])
+        failed_targets, failed_status = list(a["failed_targets"]), list(a["failed_status"])
+
+    def checkpoint():
+        if checkpoint_dir is None:
+            return
+        ids = {id(c): i for i, c in enumerate(reached)}
+        fr = np.array(sorted(ids[id(c)] for c in frontier), dtype=np.int64)
+        arrays = dict(cells=np.array([c.cell for c in reached]), p=np.array([c.p for c in reached]),
+                      u=np.array([c.u for c in reached]), frontier=fr,
+                      frontier_q=np.array([reached[i].q for i in fr]).reshape(len(fr), model.n_dof),
+                      frontier_A=np.array([reached[i].A for i in fr]).reshape(len(fr), 3, model.n_u),
+                      frontier_S=np.array([reached[i].S for i in fr]).reshape(len(fr), model.n_free, model.n_u),
+                      visited=np.array(sorted(visited)).reshape(-1, 3),
+                      visited_pts=np.array(visited_pts).reshape(-1, 3),
+                      failed_targets=np.array(failed_targets).reshape(-1, 3),
+                      failed_status=np.array(failed_status, dtype=int))
+        if settings.store_states:
+            arrays["q"] = np.array([c.q for c in reached])
+        save_checkpoint(checkpoint_dir, {"fingerprint": fp, "method": "forward-backward", "counters": counters,
+                                         "timings": timings,
+                                         "elapsed": previous + time.perf_counter() - t0}, arrays)
+
+    pool = _pool(problem, settings.workers) if settings.workers > 1 else None
     try:
         while frontier and counters["explored"] < settings.max_cells:
             counters["iterations"] += 1
@@ -216,6 +266,11 @@ def _forward_backward(problem, settings, model, step) -> WorkspaceResult:
                 cfg.S = None  # expanded: no longer needed
             timings["step3_backward"] += time.perf_counter() - t
             frontier = new_frontier
+            if not settings.store_states:
+                for c in reached:  # only the frontier's states are needed from here on
+                    if c.S is None:
+                        c.q = None
+            checkpoint()
             if settings.progress:
                 import sys
 
@@ -223,14 +278,17 @@ def _forward_backward(problem, settings, model, step) -> WorkspaceResult:
                       f"{len(reached)} reached, {counters['explored']} explored", file=sys.stderr)
     finally:
         if pool is not None:
-            pool.shutdown()
+            pool.shutdown(cancel_futures=True)
     if settings.backward.formulation == "ipopt":
         from .nlp import release_solvers
 
         release_solvers()
     counters["stopped_at_max_cells"] = bool(frontier)
     counters["feasible"] = len(reached)
-    timings["total"] = time.perf_counter() - t0
+    timings["total"] = time.perf_counter() - t0 + previous
+    timings["before_resume"] = previous
+    if checkpoint_dir is not None:
+        (Path(checkpoint_dir) / CHECKPOINT).unlink(missing_ok=True)  # complete: the result files replace it
 
     pts = np.array([c.p for c in reached])
     arrays = {"cell_step": np.array(settings.step if uniform else np.nan)}

@@ -7,6 +7,8 @@ and vertices such files often carry are ignored, and nodes used by no tetrahedro
 
 from __future__ import annotations
 
+import contextlib
+import io
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -81,10 +83,15 @@ def load_mesh(path: str | Path, scale: float = 1.0) -> Mesh:
     path = Path(path)
     if not path.is_file():
         raise MeshError(f"{path}: mesh file not found")
+    chatter = io.StringIO()
     try:
-        m = meshio.read(path)
-    except Exception as exc:  # meshio raises many kinds; the user needs the file and the reason
-        raise MeshError(f"{path}: could not be read as a mesh ({type(exc).__name__}: {exc})") from None
+        # meshio prints its own complaints ("Illegal VTK header"): the user gets one line from us instead
+        with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
+            m = meshio.read(path)
+    except (Exception, SystemExit) as exc:  # meshio raises many kinds, and exits on some unreadable files
+        text = chatter.getvalue().strip() if isinstance(exc, SystemExit) else str(exc).strip()
+        reason = text.splitlines()[-1] if text else type(exc).__name__
+        raise MeshError(f"{path}: could not be read as a mesh ({reason})") from None
     blocks = [c.data for c in m.cells if c.type == "tetra"]
     if not blocks:
         kinds = sorted({c.type for c in m.cells})

@@ -70,6 +70,8 @@ class Problem:
     point_loads: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
     """(point, force) pairs: constant forces in N on embedded points."""
     solver: SolverSettings = field(default_factory=SolverSettings)
+    workspace: dict = field(default_factory=dict)
+    """Defaults for ``casadi-ws solve`` from the file's ``workspace`` section (method, n_d, step, ...)."""
     name: str = "problem"
     source: str = "<python>"
 
@@ -111,6 +113,7 @@ _MATERIAL = {"model", "young_modulus", "poisson_ratio", "density"}
 _CABLE = {"name", "points", "pull_point", "trunk_routing", "u_min", "u_max"}
 _ROUTING = {"angle_deg", "kind", "radius", "taper", "z_start", "z_end", "spacing"}
 _SOLVER = {"tolerance", "max_iterations", "max_load_steps"}
+_WORKSPACE = {"method", "n_d", "step", "strategy", "backward", "workers"}
 
 # Largest distance from the mesh allowed for a cable passage point, relative to the mesh's size. SOFA trunk
 # cables run in grooves slightly outside the mesh; a point farther out than this is almost surely a typo
@@ -202,6 +205,13 @@ def _read_mesh(r: _Reader, d, base: Path) -> tuple[Mesh, dict]:
         except MeshError as exc:
             r.fail("mesh.file", str(exc))
     r.mapping(d, "mesh", _MESH_GEN)
+    try:
+        return _generate_mesh(r, d)
+    except MeshError as exc:  # e.g. a box so flat that its tetrahedra are degenerate
+        r.fail("mesh", str(exc))
+
+
+def _generate_mesh(r: _Reader, d) -> tuple[Mesh, dict]:
     kind = d.get("generate")
     if kind == "trunk":
         args = {k: r.number(d, k, "mesh", dflt, lo=0.0, lo_open=True) for k, dflt in
@@ -347,8 +357,25 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     solver = SolverSettings(r.number(s, "tolerance", "solver", 1e-8, lo=0.0, lo_open=True),
                             r.number(s, "max_iterations", "solver", 30, lo=1, integer=True),
                             r.number(s, "max_load_steps", "solver", 64, lo=1, integer=True))
+    w = r.mapping(d.get("workspace") or {}, "workspace", _WORKSPACE)
+    workspace = {}
+    if "method" in w:
+        if w["method"] not in ("forward", "fb"):
+            r.fail("workspace.method", f"expected 'forward' or 'fb', got {w['method']!r}")
+        workspace["method"] = w["method"]
+    if "n_d" in w:
+        workspace["nd"] = r.number(w, "n_d", "workspace", lo=1, integer=True)
+    if "step" in w:
+        workspace["step"] = r.number(w, "step", "workspace", lo=0.0, lo_open=True)
+    for key, allowed in (("strategy", ("uniform", "relative")), ("backward", ("reduced", "ipopt"))):
+        if key in w:
+            if w[key] not in allowed:
+                r.fail(f"workspace.{key}", f"expected one of {', '.join(allowed)}, got {w[key]!r}")
+            workspace[key] = w[key]
+    if "workers" in w:
+        workspace["workers"] = r.number(w, "workers", "workspace", lo=1, integer=True)
     name = str(d.get("name", Path(source).stem))
-    return Problem(mesh, material, fixed, cables, end_effector, gravity, loads, solver, name, source)
+    return Problem(mesh, material, fixed, cables, end_effector, gravity, loads, solver, workspace, name, source)
 
 
 def load_problem(path: str | Path) -> Problem:

@@ -22,7 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["WorkspaceResult", "load_result"]
+__all__ = ["FAILURE_WARNING", "WorkspaceResult", "load_result"]
+
+FAILURE_WARNING = 0.05
+"""Share of failed solves above which the summary carries a warning."""
 
 
 @dataclass
@@ -62,11 +65,24 @@ class WorkspaceResult:
     def n_failed(self) -> int:
         return int(self.failed_status.shape[0])
 
+    def warnings(self) -> list[str]:
+        """Plain-language warnings about the run (e.g. many failed points)."""
+        w = []
+        solves = self.counters.get("solves", self.counters.get("backward_solves", 0))
+        failed = self.n_failed if self.method == "forward" else self.counters.get("backward_failed", 0)
+        if solves and failed / solves > FAILURE_WARNING:
+            w.append(f"{failed} of {solves} solves failed ({100 * failed / solves:.0f} %, above "
+                     f"{100 * FAILURE_WARNING:.0f} %): the estimate may miss parts of the workspace; see failures.csv")
+        if self.counters.get("stopped_at_max_cells"):
+            w.append("the exploration stopped at max_cells: the workspace is larger than what was explored")
+        return w
+
     def summary(self) -> dict:
         return {
             "method": self.method,
             "n_points": self.n_points,
             "n_failed": self.n_failed,
+            "warnings": self.warnings(),
             "time_s": float(self.timings.get("total", float("nan"))),
             "settings": self.settings,
             "counters": self.counters,

@@ -1,0 +1,81 @@
+"""Inverse control: reach and follow, checked against forward solves."""
+
+import subprocess
+import sys
+
+import numpy as np
+from conftest import REPO, small_trunk
+
+from casadi_ws import StaticModel, solve_equilibrium
+from casadi_ws.forward import ForwardSettings, forward
+from casadi_ws.inverse import ReachSettings, follow, reach
+
+
+def test_round_trip_random_inputs(rng):
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    for _ in range(3):
+        u = rng.uniform(pb.u_min, pb.u_max)
+        tip = solve_equilibrium(m, u).tip
+        r = reach(m, tip)
+        assert r.reachable and r.error < 1e-6
+        eq = solve_equilibrium(m, r.u)  # verified independently, from rest
+        assert eq.converged and np.linalg.norm(eq.tip - tip) < 1e-6
+        assert np.all(r.u >= pb.u_min - 1e-12) and np.all(r.u <= pb.u_max + 1e-12)
+
+
+def test_far_target_returns_the_closest_reachable_tip():
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    target = np.array([0.08, 0.08, 0.15])  # beyond what 100 N per cable can do
+    r = reach(m, target)
+    assert not r.reachable and np.isfinite(r.error) and r.error > 0.01
+    cloud = forward(pb, settings=ForwardSettings(n_d=21, progress=False), model=m)
+    d_forward = np.linalg.norm(cloud.points - target, axis=1).min()
+    spacing = np.linalg.norm(np.diff(cloud.points[:21], axis=0), axis=1).max()
+    assert r.error <= d_forward + 1e-9  # no forward point is closer
+    assert r.error >= d_forward - spacing  # and it is on the cloud's boundary, not beyond it
+    assert np.any(np.isclose(r.u, pb.u_max)) or np.any(np.isclose(r.u, pb.u_min))
+
+
+def test_follow_a_circle_inside_the_workspace(tmp_path):
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    # a circle of tips produced by a circle in U, so every target is reachable
+    ang = np.linspace(0, 2 * np.pi, 13)
+    us = np.column_stack([50 + 25 * np.cos(ang), 50 + 25 * np.sin(ang)])
+    targets = np.array([solve_equilibrium(m, u).tip for u in us])
+    res = follow(m, targets)
+    assert res.reachable.all() and res.errors.max() < 1e-6
+    assert np.abs(np.diff(res.u, axis=0)).max() < 20.0  # continuous: neighbours 13 N apart in U
+    res.save_csv(tmp_path / "f.csv")
+    assert np.loadtxt(tmp_path / "f.csv", delimiter=",", skiprows=1).shape == (13, 10)
+
+
+def test_regularization_and_change_limit():
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    tip = solve_equilibrium(m, [40.0, 40.0]).tip
+    start = solve_equilibrium(m, [0.0, 0.0])
+    r = reach(m, tip, q0=start.q, u0=start.u, settings=ReachSettings(max_du=10.0))
+    assert not r.reachable and np.all(r.u <= 10.0 + 1e-9)  # 40 N is out of a 10 N step
+
+
+def test_cli_reach_and_follow(tmp_path):
+    text = (REPO / "problems" / "trunk_2cables.yaml").read_text().replace("resolution: 1.0", "resolution: 0.5")
+    prob = tmp_path / "coarse.yaml"
+    prob.write_text(text)
+    run = lambda *a: subprocess.run([sys.executable, "-m", "casadi_ws.cli", *map(str, a)], capture_output=True,
+                                    text=True)
+    import json
+
+    r = run("reach", prob, "--target", "0.5,0.5,0.5", "--compact")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert out["reachable"] is False and out["error"] > 0.3 and len(out["u"]) == 2
+    (tmp_path / "path.csv").write_text("x,y,z\n0.005,0.002,0.1945\n0.006,0.004,0.1944\n")
+    r = run("follow", prob, "--targets", tmp_path / "path.csv", "--out", tmp_path / "f")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "f" / "follow.csv").is_file() and (tmp_path / "f" / "three_views.png").is_file()
+    r = run("reach", prob, "--target", "1,2")
+    assert r.returncode == 2 and "--target" in r.stderr

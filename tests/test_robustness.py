@@ -1,0 +1,167 @@
+"""Bad input gives one clear line and exit code 2; long runs survive being killed."""
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from conftest import REPO
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from casadi_ws import ProblemError, load_problem, problem_from_dict
+from casadi_ws.cli import main
+from casadi_ws.result import load_result
+
+BAD = Path(__file__).parent / "bad_inputs"
+CASES = sorted(BAD.glob("*.yaml"))
+
+
+def _expected(path: Path) -> str:
+    first = path.read_text().splitlines()[0]
+    assert first.startswith("# expect: ")
+    return first[len("# expect: "):]
+
+
+def test_the_corpus_is_large_enough():
+    assert len(CASES) >= 20
+
+
+@pytest.mark.parametrize("path", CASES, ids=lambda p: p.stem)
+def test_bad_problem_file(path, capsys):
+    fragment = _expected(path)
+    with pytest.raises(ProblemError) as exc:
+        load_problem(path)
+    assert fragment in str(exc.value) and str(path) in str(exc.value)
+    assert "\n" not in str(exc.value)
+    assert main(["equilibrium", str(path), "--u", "1"]) == 2
+    err = capsys.readouterr().err
+    assert fragment in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_bad_file_through_the_real_command_line():
+    path = BAD / "10_poisson_half.yaml"
+    r = subprocess.run([sys.executable, "-m", "casadi_ws.cli", "solve", str(path), "--out", "/nonexistent/x"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and r.stdout == "" and "Traceback" not in r.stderr
+    assert r.stderr.strip().endswith("must be < 0.5, got 0.5")
+
+
+VALID = yaml.safe_load((BAD / "09_young_modulus_zero.yaml").read_text().replace("young_modulus: 0",
+                                                                                 "young_modulus: 1.0e+6"))
+LEAVES = st.one_of(st.none(), st.booleans(), st.integers(-10, 10), st.floats(allow_nan=True, allow_infinity=True),
+                   st.text(max_size=5), st.lists(st.floats(-1, 1), max_size=4), st.dictionaries(st.text(max_size=3),
+                                                                                               st.integers(), max_size=2))
+
+
+def _paths(d, prefix=()):
+    if isinstance(d, dict):
+        for k, v in d.items():
+            yield prefix + (k,)
+            yield from _paths(v, prefix + (k,))
+    elif isinstance(d, list):
+        for i, v in enumerate(d):
+            yield prefix + (i,)
+            yield from _paths(v, prefix + (i,))
+
+
+ALL_PATHS = list(_paths(VALID))
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.sampled_from(ALL_PATHS), LEAVES, st.sampled_from(["replace", "delete", "add"]))
+def test_perturbed_problem_loads_or_fails_with_the_validation_error(path, value, action):
+    d = yaml.safe_load(yaml.safe_dump(VALID))
+    parent = d
+    for k in path[:-1]:
+        parent = parent[k]
+    key = path[-1]
+    if action == "replace":
+        parent[key] = value
+    elif action == "delete":
+        del parent[key]
+    elif isinstance(parent, dict):
+        parent["extra_" + str(key)] = value
+    else:
+        parent.append(value)
+    try:
+        problem_from_dict(d, "<perturbed>")
+    except ProblemError as exc:
+        assert str(exc).startswith("<perturbed>")
+
+
+def test_grid_step_too_small_needs_force(tmp_path, capsys):
+    path = REPO / "problems" / "trunk_2cables.yaml"
+    assert main(["solve", str(path), "--method", "fb", "--step", "1e-5", "--out", str(tmp_path / "o")]) == 2
+    assert "pass --force" in capsys.readouterr().err
+    assert main(["solve", str(path), "--method", "fb", "--step", "0", "--out", str(tmp_path / "o")]) == 2
+
+
+# ---------------------------------------------------------------------------------------------------- resume
+
+def _coarse_problem(tmp_path):
+    text = (REPO / "problems" / "trunk_2cables.yaml").read_text().replace("resolution: 1.0", "resolution: 0.5")
+    p = tmp_path / "coarse.yaml"
+    p.write_text(text)
+    return p
+
+
+def _cli(*args):
+    return [sys.executable, "-m", "casadi_ws.cli", *map(str, args)]
+
+
+def _kill_when_checkpointed(cmd, out: Path, sig=signal.SIGKILL, timeout=120):
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    t0 = time.time()
+    while not (out / "checkpoint.npz").exists():
+        assert proc.poll() is None, f"finished before a checkpoint: {proc.communicate()}"
+        assert time.time() - t0 < timeout
+        time.sleep(0.05)
+    time.sleep(0.3)
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    return proc.returncode, err
+
+
+@pytest.mark.parametrize("method,args", [("forward", ["--nd", "14", "--checkpoint-every", "0.3"]),
+                                         ("fb", ["--step", "0.006"])])
+def test_killed_run_resumes_to_the_same_result(tmp_path, method, args):
+    prob = _coarse_problem(tmp_path)
+    base = ["solve", prob, "--method", method, *args, "--quiet"]
+    ref = subprocess.run(_cli(*base, "--out", tmp_path / "ref"), capture_output=True, text=True)
+    assert ref.returncode == 0, ref.stderr
+    out = tmp_path / "killed"
+    code, _ = _kill_when_checkpointed(_cli(*base, "--out", out), out)
+    assert code == -signal.SIGKILL
+    assert not (out / "summary.json").exists()
+    r = subprocess.run(_cli(*base, "--out", out), capture_output=True, text=True)
+    assert r.returncode == 2 and "--resume" in r.stderr  # never silently overwritten
+    r = subprocess.run(_cli(*base, "--out", out, "--resume"), capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    a, b = load_result(tmp_path / "ref"), load_result(out)
+    assert a.n_points == b.n_points and a.n_failed == b.n_failed
+    np.testing.assert_array_equal(a.u, b.u)
+    assert np.abs(a.points - b.points).max() < 1e-8
+    if method == "fb":
+        for k in ("explored", "feasible", "iterations", "backward_solves"):
+            assert a.counters[k] == b.counters[k], k
+    assert not (out / "checkpoint.npz").exists()
+    r = subprocess.run(_cli(*base, "--out", out, "--resume"), capture_output=True, text=True)
+    assert r.returncode == 2 and "complete" in r.stderr
+
+
+def test_ctrl_c_stops_cleanly_with_a_resumable_checkpoint(tmp_path):
+    prob = _coarse_problem(tmp_path)
+    out = tmp_path / "run"
+    cmd = _cli("solve", prob, "--nd", "14", "--checkpoint-every", "0.3", "--quiet", "--out", out)
+    code, err = _kill_when_checkpointed(cmd, out, sig=signal.SIGINT)
+    assert code == 130 and "--resume" in err and "Traceback" not in err
+    r = subprocess.run(_cli("solve", prob, "--nd", "14", "--quiet", "--out", out, "--resume"),
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert json.loads((out / "summary.json").read_text())["n_points"] == 14 * 14
