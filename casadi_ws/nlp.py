@@ -213,13 +213,16 @@ class TrackingNLP:
 
         def f_and_g(x, p):
             qf, u, e, du = parts(x, p)
-            f = float(e @ (W * e)) + self.rho * float(du @ du)
-            return [ca.DM(f), ca.DM(model.residual(model.full(qf), u))]
+            q = model.full(qf)
+            f = float(e @ (W * e)) + self.rho * float(du @ du) + float(self.extra_value(q, u))
+            return [ca.DM(f), ca.DM(model.residual(q, u))]
 
         def grad_f(x, p):
             qf, u, e, du = parts(x, p)
-            f = float(e @ (W * e)) + self.rho * float(du @ du)
-            return [ca.DM(f), ca.DM(np.concatenate([2.0 * (C.T @ (W * e)), 2.0 * self.rho * du]))]
+            q = model.full(qf)
+            f = float(e @ (W * e)) + self.rho * float(du @ du) + float(self.extra_value(q, u))
+            g = np.concatenate([2.0 * (C.T @ (W * e)), 2.0 * self.rho * du]) + self.extra_gradient(q, u)
+            return [ca.DM(f), ca.DM(g)]
 
         def jac_g(x, p):
             q, u = pieces.split(x)
@@ -231,7 +234,19 @@ class TrackingNLP:
             H = pieces.hessian(q, u, np.asarray(lam_g).ravel(), lf, self._objective_hessian)
             if self.rho and nu:
                 H = H + sp.diags(np.concatenate([np.zeros(nq), np.full(nu, 2.0 * self.rho * lf)]))
-            return [pieces.hess_values(sp.triu(H))]
+            extra = self.extra_hessian(q, u)
+            if extra is not None:
+                H = H + lf * extra
+            return [self.hess_values(sp.triu(H))]
+
+        # the Hessian's sparsity is fixed before the first solve: include the extra term's pattern
+        rng = np.random.default_rng(1)
+        q_probe = model.full(rng.normal(size=nq) * 1e-6)
+        extra = self.extra_hessian(q_probe, np.ones(nu))
+        pattern = pieces.hess_pattern
+        if extra is not None:
+            pattern = (abs(pattern) + sp.triu(abs(extra) + (extra != 0))).tocsc()
+        self.hess_values = _Values(pattern)
 
         xs, ps = ("x", dense(nx, 1)), ("p", dense(n_p, 1))
         self._cbs = [
@@ -239,11 +254,22 @@ class TrackingNLP:
             _Fn("grad_f", [xs, ps], [("f", dense(1, 1)), ("grad_f_x", dense(nx, 1))], grad_f),
             _Fn("jac_g", [xs, ps], [("g", dense(nq, 1)), ("jac_g_x", pieces.jac_values.sparsity)], jac_g),
             _Fn("hess_lag", [xs, ps, ("lam_f", dense(1, 1)), ("lam_g", dense(nq, 1))],
-                [("hess_gamma_x_x", pieces.hess_values.sparsity)], hess_lag),
+                [("hess_gamma_x_x", self.hess_values.sparsity)], hess_lag),
         ]
         opts = dict(IPOPT_OPTIONS, grad_f=self._cbs[1], jac_g=self._cbs[2], hess_lag=self._cbs[3])
         self.solver = ca.nlpsol("tracking", "ipopt", self._cbs[0], opts)
         self.lam_g = np.zeros(nq)
+
+    # hooks for further objective terms (see docs/nlp-library.md); q is the full displacement vector
+    def extra_value(self, q, u) -> float:
+        return 0.0
+
+    def extra_gradient(self, q, u) -> np.ndarray:
+        return np.zeros(self.pieces.nx)
+
+    def extra_hessian(self, q, u):
+        """Hessian over x = (q_free, u) of the extra term (sparse), or None."""
+        return None
 
     def solve(self, targets, q, u, u_ref=None, u_lower=None, u_upper=None):
         """Warm-started solve; returns (q_full, u, IPOPT stats). ``targets``: (n_points, 3)."""
