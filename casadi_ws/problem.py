@@ -216,6 +216,9 @@ def _generate_mesh(r: _Reader, d) -> tuple[Mesh, dict]:
     if kind == "trunk":
         args = {k: r.number(d, k, "mesh", dflt, lo=0.0, lo_open=True) for k, dflt in
                 (("length", 0.195), ("radius_base", 0.013), ("radius_tip", 0.005), ("resolution", 1.0))}
+        n_xy = max(2, 2 * int(round(3 * args["resolution"])))
+        n_z = max(2, int(round(20 * args["resolution"])))
+        _check_size(r, "mesh.resolution", 6 * n_xy * n_xy * n_z)
         return trunk_mesh(**args), args
     if kind == "box":
         size = r.vector(d.get("size", [1, 1, 1]), "mesh.size")
@@ -224,10 +227,20 @@ def _generate_mesh(r: _Reader, d) -> tuple[Mesh, dict]:
             r.fail("mesh.size", f"all sizes must be > 0, got {size.tolist()}")
         if np.any(div < 1) or np.any(div != np.round(div)):
             r.fail("mesh.divisions", f"expected positive integers, got {div.tolist()}")
+        _check_size(r, "mesh.divisions", 6 * float(np.prod(div)))
         origin = r.vector(d.get("origin", [0, 0, 0]), "mesh.origin")
         return box_mesh(tuple(size), tuple(int(x) for x in div), tuple(origin)), {}
     r.fail("mesh", "expected 'file: PATH' or 'generate: trunk|box'" if kind is None else
            f"mesh.generate: expected 'trunk' or 'box', got {kind!r}")
+
+
+# Largest generated mesh: beyond this the model would need tens of GB (and hours per solve).
+MAX_GENERATED_TETS = 2_000_000
+
+
+def _check_size(r: _Reader, key: str, n_tets: float) -> None:
+    if n_tets > MAX_GENERATED_TETS:
+        r.fail(key, f"would generate {n_tets:.3g} tetrahedra, more than {MAX_GENERATED_TETS:.0e}")
 
 
 def _read_fixed(r: _Reader, d, mesh: Mesh) -> np.ndarray:
