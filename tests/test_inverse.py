@@ -79,3 +79,20 @@ def test_cli_reach_and_follow(tmp_path):
     assert (tmp_path / "f" / "follow.csv").is_file() and (tmp_path / "f" / "three_views.png").is_file()
     r = run("reach", prob, "--target", "1,2")
     assert r.returncode == 2 and "--target" in r.stderr
+
+
+def test_orientation_with_extra_points_round_trip(rng):
+    """Three points around the tip fix its position and orientation (the publication's Section 7)."""
+    from casadi_ws.mesh import embed
+
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    extra = np.array([[0.002, 0.0, 0.19], [0.0, 0.002, 0.19]])
+    W = embed(m.mesh, extra).matrix(m.mesh)
+    u = rng.uniform(pb.u_min, pb.u_max)
+    eq = solve_equilibrium(m, u)
+    goals = (W @ (m.X + eq.q)).reshape(-1, 3)
+    r = reach(m, eq.tip, settings=ReachSettings(extra_points=list(extra)), extra_targets=goals)
+    assert r.reachable
+    np.testing.assert_allclose((W @ (m.X + r.q)).reshape(-1, 3), goals, atol=1e-6)
+    np.testing.assert_allclose(r.u, u, rtol=1e-4, atol=1e-3)  # with orientation, u is determined here
