@@ -192,3 +192,20 @@ def test_fb_result_does_not_depend_on_the_number_of_workers():
     assert one.counters == two.counters
     np.testing.assert_array_equal(one.arrays["cells"], two.arrays["cells"])
     assert np.abs(one.points - two.points).max() < 1e-12
+
+
+def test_relative_strategy_explores_with_steps_relative_to_the_distance():
+    pb = small_trunk("corotational", n_cables=2)
+    model = StaticModel(pb)
+    fb = forward_backward(pb, FBSettings(strategy="relative", relative_ratio=0.03, progress=False), model=model)
+    assert fb.n_points > 5 and "cells" not in fb.arrays
+    # targets are at least eta/2 apart (exclusion applies to targets, so two reached tips may land close);
+    # every point is a verified equilibrium inside U
+    from scipy.spatial.distance import pdist
+
+    eta = 0.03 * np.linalg.norm(fb.points[0])
+    assert pdist(fb.points).min() > 0
+    for u, p in zip(fb.u[::4], fb.points[::4]):
+        assert np.linalg.norm(solve_equilibrium(model, u).tip - p) < 1e-7
+    fw = forward(pb, settings=ForwardSettings(n_d=11, progress=False), model=model)
+    assert compare(fw, fb, step=eta)["coverage"] >= 0.9
