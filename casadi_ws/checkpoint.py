@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -30,8 +31,10 @@ def fingerprint(method: str, model, settings: dict) -> str:
     for a in (model.X, model.mesh.tets, model.free, model.F, model.u_min, model.u_max, model.p0):
         h.update(np.ascontiguousarray(a).tobytes())
     pb = model.problem
-    h.update(json.dumps([pb.material.model, pb.material.young_modulus, pb.material.poisson_ratio,
-                         pb.solver.tolerance, [np.asarray(c.points).tolist() for c in pb.cables]]).encode())
+    h.update(json.dumps([asdict(pb.material), asdict(pb.solver),
+                         [np.asarray(c.points).tolist() for c in pb.cables],
+                         [None if c.pull_point is None else np.asarray(c.pull_point).tolist() for c in pb.cables]],
+                        default=float).encode())
     h.update(json.dumps(settings, sort_keys=True, default=str).encode())
     return h.hexdigest()[:20]
 

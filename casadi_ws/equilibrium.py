@@ -217,16 +217,21 @@ def solve_equilibrium(model, u, q0: np.ndarray | None = None, u0: np.ndarray | N
     its, nfac, steps = res.iterations, res.factorizations, 0
     if res.status != CONVERGED and continuation:
         if q0 is not None and u0 is not None:
-            q_s, u_s, load_s = q0.copy(), np.asarray(u0, dtype=float), 1.0
+            q_s, u_s, load_s = np.asarray(q0, dtype=float).copy(), np.asarray(u0, dtype=float), 1.0
         else:
             q_s, u_s, load_s = np.zeros(model.n_dof), np.zeros(model.n_u), 0.0
         res, s_its, s_fac, steps = _continuation(model, q_s, u_s, load_s, u, tol, max_iter,
                                                  settings.max_load_steps, res.fac)
         its, nfac = its + s_its, nfac + s_fac
     status = res.status
-    if status == CONVERGED and (np.any(u < model.u_min - 1e-12) or np.any(u > model.u_max + 1e-12)):
+    residual = res.residual
+    if status == CONTINUATION_FAILED:  # res.q belongs to a partial load: judge it at the asked u instead
+        R, scale = model.residual(res.q, u, 1.0, with_scale=True)
+        residual = float(np.linalg.norm(R) / scale)
+    slack = 1e-12 * np.maximum(1.0, np.abs(model.u_max))
+    if status == CONVERGED and (np.any(u < model.u_min - slack) or np.any(u > model.u_max + slack)):
         status = OUTSIDE_BOUNDS
-    return Equilibrium(res.q, u, model.tip(res.q), status, its, nfac, float(res.residual), steps, res.fac)
+    return Equilibrium(res.q, u, model.tip(res.q), status, its, nfac, float(residual), steps, res.fac)
 
 
 def _continuation(model, q, u_start, load_start, u_end, tol, max_iter, max_steps, fac):

@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from .checkpoint import CHECKPOINT, fingerprint, load_checkpoint, save_checkpoint
-from .equilibrium import CONVERGED, OUTSIDE_BOUNDS, Equilibrium, newton_krylov, solve_equilibrium
+from .equilibrium import (CONVERGED, OUTSIDE_BOUNDS, Equilibrium, Factorization, factorize, newton_krylov,
+                          solve_equilibrium)
 from .model import StaticModel
 from .parallel import one_blas_thread, process_pool
 from .result import WorkspaceResult
@@ -75,7 +76,8 @@ def input_grid(u_min, u_max, n_d: int) -> np.ndarray:
     u_min, u_max = np.asarray(u_min, float), np.asarray(u_max, float)
     axes = np.linspace(0.0, 1.0, n_d) if n_d > 1 else np.zeros(1)
     idx = snake_order(n_d, u_min.size)
-    return u_min + axes[idx] * (u_max - u_min)
+    # clip: u_min + 1.0 (u_max - u_min) can exceed u_max by an ulp, which the bounds check would refuse
+    return np.clip(u_min + axes[idx] * (u_max - u_min), u_min, u_max)
 
 
 def _predict(model, history, u, fac, mode):
@@ -140,7 +142,8 @@ def _solve_point(model, u, j, settings, tol, sw: _Sweep, counters):
     counters["load_steps"] += eq.load_steps
     if eq.status == CONVERGED:
         sw.history = (sw.history + [(u.copy(), eq.q)])[-3:]
-        sw.fac = eq.factorization
+        if eq.factorization is not None:  # a point verified without a Newton step keeps the last LU
+            sw.fac = eq.factorization
         sw.start = (eq.q, u.copy())
     else:
         sw.history = []  # next point: continuation from the last verified equilibrium
@@ -174,13 +177,18 @@ def _sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progre
         sw.history = list(zip(resume["hist_u"], resume["hist_q"]))
         if len(resume["start_q"]):
             sw.start = (resume["start_q"], resume["start_u"])
+        if sw.history:  # the LU is not saved: refactorise at the last verified point (tangent predictor)
+            u_last, q_last = sw.history[-1]
+            _, K, _ = model.residual_and_tangent(q_last, u_last)
+            sw.fac = Factorization(factorize(K), q_last.copy())
         if progress is not None:
             progress(first)
 
     def state(nxt):
         st = dict(next=nxt, tips=tips[:nxt], status=status[:nxt], residual=residual[:nxt],
-                  counters=dict(counters), hist_u=np.array([h[0] for h in sw.history]).reshape(len(sw.history), -1),
-                  hist_q=np.array([h[1] for h in sw.history]).reshape(len(sw.history), -1),
+                  counters=dict(counters),
+                  hist_u=np.array([h[0] for h in sw.history]).reshape(len(sw.history), model.n_u),
+                  hist_q=np.array([h[1] for h in sw.history]).reshape(len(sw.history), model.n_dof),
                   start_q=np.zeros(0) if sw.start is None else sw.start[0],
                   start_u=np.zeros(0) if sw.start is None else sw.start[1])
         if states is not None:
@@ -188,21 +196,27 @@ def _sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progre
         return st
 
     last_save = time.perf_counter()
-    j = first
+    done = first  # points whose results, history and counters are all recorded
     try:
         for j in range(first, n):
-            eq = _solve_point(model, us[j], j, settings, tol, sw, counters)
+            snapshot = (list(sw.history), sw.fac, sw.start, dict(counters))
+            try:
+                eq = _solve_point(model, us[j], j, settings, tol, sw, counters)
+            except KeyboardInterrupt:  # point j half done: forget it, it is solved again on resume
+                sw.history, sw.fac, sw.start, counters = snapshot
+                raise
             tips[j], status[j], residual[j] = eq.tip, eq.status, eq.residual
             if states is not None and eq.status == CONVERGED:
                 states[j] = eq.q
+            done = j + 1
             if progress is not None:
                 progress(1)
             if checkpoint is not None and time.perf_counter() - last_save > settings.checkpoint_every:
-                checkpoint(state(j + 1))
+                checkpoint(state(done))
                 last_save = time.perf_counter()
     except KeyboardInterrupt:
         if checkpoint is not None:
-            checkpoint(state(j))  # point j was not finished: it is solved again on resume
+            checkpoint(state(done))
         raise
     return tips, status, residual, states, counters
 

@@ -59,7 +59,8 @@ class FBSettings:
     by default. Over a one-cell move the linearisation errs by ~s^2 x curvature (~0.04 s on the trunk at
     s = 4 mm), so such a cell is not reached. Recorded as ``prefiltered``. None: off (the paper's rule)."""
     max_cells: int = 200_000
-    """Stop (with a note in the counters) after exploring this many grid points."""
+    """Stop (with a note in the counters and a warning in the summary) after the iteration in which this
+    many grid points have been explored."""
     store_states: bool = False
     """Keep every reached point's nodal displacements."""
     workers: int = 1

@@ -128,3 +128,21 @@ def test_cli_solve_writes_files_and_refuses_to_overwrite(tmp_path):
         assert (out / f).is_file(), f
     r = subprocess.run(cmd, capture_output=True, text=True)
     assert r.returncode == 2 and "--overwrite" in r.stderr
+
+
+def test_checkpoints_survive_failed_points_and_resume_to_the_same_sweep():
+    from casadi_ws.forward import _sweep
+
+    pb = small_trunk("corotational", n_cables=2)
+    pb.solver.max_load_steps = 2
+    m = StaticModel(pb)
+    s = ForwardSettings(n_d=4, progress=False, max_iter=1, predictor="none", checkpoint_every=0.0)
+    us = input_grid(pb.u_min, pb.u_max, 4)
+    saved = []
+    ref = _sweep(m, us, s, checkpoint=lambda st: saved.append(st))  # a checkpoint after every point
+    assert (ref[1] != 0).any() and len(saved) == len(us)
+    assert any(len(st["hist_u"]) == 0 for st in saved)  # states right after a failure are saved too
+    mid = saved[len(us) // 2 - 1]
+    again = _sweep(m, us, s, resume=dict(mid))
+    np.testing.assert_array_equal(again[1], ref[1])
+    assert np.nanmax(np.abs(again[0] - ref[0])) < 1e-8
