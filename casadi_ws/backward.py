@@ -21,10 +21,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import lsq_linear
-
 from .equilibrium import CONVERGED, Factorization, factorize, solve_equilibrium
-from .interval import sensitivity
+from .interval import bounded_step, sensitivity
 
 __all__ = ["BackwardResult", "BackwardSettings", "backward"]
 
@@ -90,10 +88,7 @@ def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardRe
     for it in range(1, settings.max_iterations + 1):
         A, S = sens if (it == 1 and sens is not None) else sensitivity(model, q, fac)
         # bounded linear least squares for du: min |tip + A du - target|^2, u_min <= u + du <= u_max
-        lo, hi = model.u_min - u, model.u_max - u
-        hi = np.maximum(hi, lo + 1e-300)  # lsq_linear wants lo < hi; a pinned bound keeps du = 0
-        du = lsq_linear(A, target - tip, bounds=(lo, hi), method="bvls").x if model.n_u else np.zeros(0)
-        du = np.clip(du, model.u_min - u, model.u_max - u)
+        du = bounded_step(A, target - tip, model.u_min - u, model.u_max - u)
         if not np.any(du):
             return BackwardResult(q, u, tip, SOLVED, it - 1, n_eq, n_fac, fac)
         u_new = u + du

@@ -33,7 +33,7 @@ from .backward import BackwardSettings, backward
 from .checkpoint import CHECKPOINT, fingerprint, load_checkpoint, save_checkpoint
 from .equilibrium import CONVERGED, Factorization, factorize, solve_equilibrium
 from .forward import describe
-from .interval import Grid, interval_box, neighbourhood, sensitivity
+from .interval import Grid, bounded_step, interval_box, neighbourhood, sensitivity
 from .model import StaticModel
 from .parallel import one_blas_thread, process_pool
 from .result import WorkspaceResult
@@ -161,7 +161,7 @@ def _forward_backward(problem, settings, model, step, checkpoint_dir=None, resum
     frontier = [start]
 
     # checkpoints at iteration boundaries, where the state is complete and the run deterministic
-    fp = fingerprint("forward-backward", model, _plain(settings) | {"workers": None, "progress": None})
+    fp = fingerprint("forward-backward", model, asdict(settings) | {"workers": None, "progress": None})
     previous = 0.0
     if resume:
         if checkpoint_dir is None:
@@ -302,7 +302,7 @@ def _forward_backward(problem, settings, model, step, checkpoint_dir=None, resum
         failed_u=np.array(failed_targets).reshape(-1, 3), failed_status=np.array(failed_status, dtype=int),
         failed_residual=np.full(len(failed_status), np.nan),
         states=np.array([c.q for c in reached]) if settings.store_states else None,
-        counters=counters, timings=timings, settings=_plain(settings), problem=describe(problem, model),
+        counters=counters, timings=timings, settings=asdict(settings), problem=describe(problem, model),
         rest_tip=model.p0, arrays=arrays)
 
 
@@ -311,14 +311,5 @@ def _pool(problem, workers):
 
 
 def _linear_closest(A, p, u, model, target):
-    """Tip of the linearised model closest to target over the remaining input range (bounded LSQ)."""
-    from scipy.optimize import lsq_linear
-
-    lo, hi = model.u_min - u, model.u_max - u
-    du = lsq_linear(A, target - p, bounds=(lo, np.maximum(hi, lo + 1e-300)), method="bvls").x
-    return p + A @ np.clip(du, lo, hi)
-
-
-def _plain(settings: FBSettings) -> dict:
-    d = asdict(settings)
-    return d
+    """Tip of the linearised model closest to target over the remaining input range."""
+    return p + A @ bounded_step(A, target - p, model.u_min - u, model.u_max - u)

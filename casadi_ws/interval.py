@@ -22,7 +22,7 @@ import itertools
 
 import numpy as np
 
-__all__ = ["Grid", "NEIGHBOURS", "interval_box", "neighbourhood", "sensitivity"]
+__all__ = ["Grid", "NEIGHBOURS", "bounded_step", "interval_box", "neighbourhood", "sensitivity"]
 
 NEIGHBOURS = np.array([d for d in itertools.product((-1, 0, 1), repeat=3) if any(d)], dtype=np.int64)
 """The 26 offsets of the ring at infinity-norm distance 1."""
@@ -33,6 +33,17 @@ def sensitivity(model, q, fac) -> tuple[np.ndarray, np.ndarray]:
     H = model.actuation_matrix(q)  # (n_u, n_free), H = -dL/dq
     S = np.column_stack([fac.solve(H[i]) for i in range(model.n_u)]) if model.n_u else np.zeros((model.n_free, 0))
     return model.C_free @ S, S
+
+
+def bounded_step(A: np.ndarray, r: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """du minimising |A du - r| with lo <= du <= hi (bounded linear least squares, BVLS)."""
+    from scipy.optimize import lsq_linear
+
+    if A.shape[1] == 0:
+        return np.zeros(0)
+    # lsq_linear wants lo < hi; a bound pinned at lo = hi keeps that du at 0 after the clip
+    du = lsq_linear(A, r, bounds=(lo, np.maximum(hi, lo + 1e-300)), method="bvls").x
+    return np.clip(du, lo, hi)
 
 
 def interval_box(A: np.ndarray, p: np.ndarray, du_low: np.ndarray, du_up: np.ndarray):

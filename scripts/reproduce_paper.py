@@ -27,7 +27,7 @@ import numpy as np
 
 import casadi_ws as cw
 from casadi_ws.compare import compare
-from casadi_ws.forward import ForwardSettings, _sweep, forward, input_grid
+from casadi_ws.forward import ForwardSettings, _sweep, forward
 from casadi_ws.forward_backward import FBSettings, forward_backward
 from casadi_ws.parallel import one_blas_thread
 from casadi_ws.plots import three_views

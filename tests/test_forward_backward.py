@@ -5,7 +5,6 @@ import subprocess
 import sys
 
 import numpy as np
-import pytest
 from conftest import REPO, small_trunk
 
 from casadi_ws import StaticModel, solve_equilibrium
