@@ -25,7 +25,7 @@ from .checkpoint import CHECKPOINT, fingerprint, load_checkpoint, save_checkpoin
 from .equilibrium import (CONVERGED, OUTSIDE_BOUNDS, Equilibrium, Factorization, factorize, newton_krylov,
                           solve_equilibrium)
 from .model import StaticModel
-from .parallel import one_blas_thread, process_pool
+from .parallel import deferred_interrupt, one_blas_thread, process_pool
 from .result import WorkspaceResult
 
 __all__ = ["ForwardSettings", "forward", "input_grid", "snake_order"]
@@ -198,22 +198,24 @@ def _sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progre
     last_save = time.perf_counter()
     done = first  # points whose results, history and counters are all recorded
     try:
-        for j in range(first, n):
-            snapshot = (list(sw.history), sw.fac, sw.start, dict(counters))
-            try:
-                eq = _solve_point(model, us[j], j, settings, tol, sw, counters)
-            except KeyboardInterrupt:  # point j half done: forget it, it is solved again on resume
-                sw.history, sw.fac, sw.start, counters = snapshot
-                raise
-            tips[j], status[j], residual[j] = eq.tip, eq.status, eq.residual
-            if states is not None and eq.status == CONVERGED:
-                states[j] = eq.q
-            done = j + 1
-            if progress is not None:
-                progress(1)
-            if checkpoint is not None and time.perf_counter() - last_save > settings.checkpoint_every:
-                checkpoint(state(done))
-                last_save = time.perf_counter()
+        with deferred_interrupt() as ctrl_c:
+            for j in range(first, n):
+                snapshot = (list(sw.history), sw.fac, sw.start, dict(counters))
+                try:
+                    eq = _solve_point(model, us[j], j, settings, tol, sw, counters)
+                except KeyboardInterrupt:  # a second Ctrl-C mid-point: forget it, it is solved again on resume
+                    sw.history, sw.fac, sw.start, counters = snapshot
+                    raise
+                tips[j], status[j], residual[j] = eq.tip, eq.status, eq.residual
+                if states is not None and eq.status == CONVERGED:
+                    states[j] = eq.q
+                done = j + 1
+                if progress is not None:
+                    progress(1)
+                if checkpoint is not None and time.perf_counter() - last_save > settings.checkpoint_every:
+                    checkpoint(state(done))
+                    last_save = time.perf_counter()
+                ctrl_c.check()  # Ctrl-C stops here, between points, where the state is complete
     except KeyboardInterrupt:
         if checkpoint is not None:
             checkpoint(state(done))

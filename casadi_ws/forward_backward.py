@@ -35,7 +35,7 @@ from .equilibrium import CONVERGED, Factorization, factorize, solve_equilibrium
 from .forward import describe
 from .interval import Grid, bounded_step, interval_box, neighbourhood, sensitivity
 from .model import StaticModel
-from .parallel import one_blas_thread, process_pool
+from .parallel import deferred_interrupt, one_blas_thread, process_pool
 from .result import WorkspaceResult
 
 __all__ = ["FBSettings", "forward_backward"]
@@ -204,6 +204,8 @@ def _forward_backward(problem, settings, model, step, checkpoint_dir=None, resum
                                          "elapsed": previous + time.perf_counter() - t0}, arrays)
 
     pool = _pool(problem, settings.workers) if settings.workers > 1 else None
+    interrupt = deferred_interrupt()
+    ctrl_c = interrupt.__enter__()  # Ctrl-C stops between configurations; the last iteration's checkpoint stays
     try:
         while frontier and counters["explored"] < settings.max_cells:
             counters["iterations"] += 1
@@ -249,7 +251,14 @@ def _forward_backward(problem, settings, model, step, checkpoint_dir=None, resum
             t = time.perf_counter()
             jobs = [(cfg.q, cfg.u, cfg.A, cfg.S, [tg for _, tg in todo], eta, settings.backward)
                     for cfg, todo, eta in tasks]
-            outs = [_expand(model, *j) for j in jobs] if pool is None else list(pool.map(_worker_expand, jobs))
+            if pool is None:
+                outs = []
+                for j in jobs:
+                    outs.append(_expand(model, *j))
+                    ctrl_c.check()
+            else:
+                outs = list(pool.map(_worker_expand, jobs))
+                ctrl_c.check()
             new_frontier = []
             for (cfg, todo, eta), out in zip(tasks, outs):
                 for (cell, target), (q, u, tip, status, ok, A, S, n_eq, n_fac) in zip(todo, out):
@@ -278,6 +287,7 @@ def _forward_backward(problem, settings, model, step, checkpoint_dir=None, resum
                 print(f"forward-backward: iteration {counters['iterations']}: {len(new_frontier)} new cells, "
                       f"{len(reached)} reached, {counters['explored']} explored", file=sys.stderr)
     finally:
+        interrupt.__exit__(None, None, None)
         if pool is not None:
             pool.shutdown(cancel_futures=True)
     if settings.backward.formulation == "ipopt":

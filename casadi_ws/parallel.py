@@ -12,9 +12,11 @@ from __future__ import annotations
 import contextlib
 import multiprocessing as mp
 import os
+import signal
+import threading
 from concurrent.futures import ProcessPoolExecutor
 
-__all__ = ["one_blas_thread", "process_pool"]
+__all__ = ["deferred_interrupt", "one_blas_thread", "process_pool"]
 
 
 @contextlib.contextmanager
@@ -40,3 +42,40 @@ def process_pool(workers: int, initializer=None, initargs=()) -> ProcessPoolExec
         os.environ.setdefault(var, "1")  # inherited by the children before they import numpy
     return ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=_init,
                                initargs=(initializer, initargs))
+
+
+class _Deferred:
+    requested = False
+
+    def check(self) -> None:
+        """Raise KeyboardInterrupt here, at a safe point, if Ctrl-C was pressed."""
+        if self.requested:
+            self.requested = False
+            raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def deferred_interrupt():
+    """Turn Ctrl-C into a flag that the code checks at safe points (``.check()``).
+
+    A KeyboardInterrupt raised inside CasADi's or SciPy's C code can surface as a SystemError, and it can
+    leave a half-updated state; deferring it to points where the state is complete keeps the checkpoint
+    consistent and the exit clean. A second Ctrl-C interrupts at once.
+    """
+    d = _Deferred()
+    if threading.current_thread() is not threading.main_thread():
+        yield d
+        return
+    previous = signal.getsignal(signal.SIGINT)
+
+    def handler(signum, frame):
+        if d.requested:  # pressed twice: stop now
+            signal.signal(signal.SIGINT, previous)
+            raise KeyboardInterrupt
+        d.requested = True
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield d
+    finally:
+        signal.signal(signal.SIGINT, previous)
