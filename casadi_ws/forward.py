@@ -1,12 +1,16 @@
 """The forward method (publication, Section 4.1): grid the input box U, solve the equilibrium at every node.
 
 Each actuator's bound [u_min, u_max] is split into ``n_d`` values, and the n_d^n_u combinations are visited
-in serpentine ("snake") order, so consecutive inputs differ by one grid step in one actuator and each
-solve is warm-started from an already solved neighbour. The first iterate is predicted by extrapolating
-the previous solutions along the current grid line (quadratic from three, linear from two; the tangent
-K^-1 dR/du du at a turn), which leaves an error of ~1e-8 m on the trunk: one Newton step then verifies
-the point. Measured alternatives (chord steps with a reused factorisation, plain warm start) are slower
-on geometrically nonlinear robots; see BENCHMARKS.md.
+in serpentine ("snake") order: grid lines along the last actuator, consecutive lines running in opposite
+directions, so every solve starts next to an already solved point.
+
+Along a line, Newton solves every ``stride``-th point (default ~8 % of the range apart). Its first iterate is
+the polynomial through the line's previous Newton points (up to 6; the tangent K^-1 dR/du du at a turn),
+so one Newton step with a fresh factorisation finishes it. The points between are the polynomial through
+the nearest (up to 8) Newton points of the line, and are accepted on the same check as any other point;
+on the trunk they pass with residuals ~1e-10, so most points cost one residual evaluation instead of a
+factorisation. Measured alternatives (chord steps or GMRES with an older factorisation, which the soft
+modes of a cable-loaded body defeat) are in docs/methods.md and BENCHMARKS.md.
 
 Every point is checked (relative residual below tolerance, u inside U). A point that fails is kept as a
 failure with its u and status, never among the reachable points; the sweep then restarts from the last
@@ -22,13 +26,13 @@ from pathlib import Path
 import numpy as np
 
 from .checkpoint import CHECKPOINT, fingerprint, load_checkpoint, save_checkpoint
-from .equilibrium import (CONVERGED, OUTSIDE_BOUNDS, Equilibrium, Factorization, factorize, newton_krylov,
+from .equilibrium import (CONVERGED, MAX_ITERATIONS, OUTSIDE_BOUNDS, Equilibrium, Factorization, factorize, newton_krylov,
                           solve_equilibrium)
 from .model import StaticModel
 from .parallel import deferred_interrupt, one_blas_thread, process_pool
 from .result import WorkspaceResult
 
-__all__ = ["ForwardSettings", "forward", "input_grid", "snake_order"]
+__all__ = ["ForwardSettings", "forward", "input_grid", "lagrange_weights", "line_stride", "snake_order", "verify"]
 
 
 @dataclass
@@ -57,6 +61,11 @@ class ForwardSettings:
     """Seconds between checkpoints when the run has an output directory (see :func:`forward`)."""
     max_iter: int | None = None
     """Newton iterations per point; default: the problem's ``solver.max_iterations``."""
+    stride: int | None = None
+    """Along each grid line, Newton solves every ``stride``-th point (and the last); the points between are
+    the polynomial through the nearest (up to 8) solved points of the line, accepted if their residual passes
+    the same check, else solved by Newton from there. 1: Newton everywhere. Default: n_d // 12, clamped to
+    [1, 8] (so the solved points stay ~8 % of the range apart)."""
 
 
 def snake_order(n_d: int, n_u: int) -> np.ndarray:
@@ -80,39 +89,87 @@ def input_grid(u_min, u_max, n_d: int) -> np.ndarray:
     return np.clip(u_min + axes[idx] * (u_max - u_min), u_min, u_max)
 
 
+def lagrange_weights(xs, x) -> np.ndarray:
+    """Weights w with sum_i w_i f(xs_i) = the polynomial through (xs_i, f(xs_i)) evaluated at x."""
+    xs = np.asarray(xs, dtype=float)
+    w = np.ones(xs.size)
+    for i in range(xs.size):
+        others = np.delete(xs, i)
+        w[i] = np.prod((x - others) / (xs[i] - others))
+    return w
+
+
+def _line_axis(u_a, u_b):
+    """The one actuator in which u_a and u_b differ, or None."""
+    d = np.flatnonzero(u_a != u_b)
+    return int(d[0]) if d.size == 1 else None
+
+
 def _predict(model, history, u, fac, mode):
     """First iterate for u from the previous verified points ``history`` [(u, q), ...] (newest last)."""
     u_prev, q_prev = history[-1]
     if mode == "none":
         return q_prev
-    du = u - u_prev
-    if mode == "extrapolate" and len(history) >= 2:
-        # points on the same grid line, equally spaced, ending at the previous one
-        line = [history[-1]]
-        for k in range(len(history) - 2, max(len(history) - 4, -1), -1):
-            if np.allclose(line[-1][0] - history[k][0], du):
-                line.append(history[k])
-            else:
-                break
-        if len(line) >= 3:
-            return 3 * line[0][1] - 3 * line[1][1] + line[2][1]
-        if len(line) == 2:
-            return 2 * line[0][1] - line[1][1]
+    if mode == "extrapolate":
+        line = _nearest_on_a_line(model, history, u)
+        if line is not None:
+            axis, xs, qs = line
+            return sum(wi * qi for wi, qi in zip(lagrange_weights(xs, u[axis]), qs))
     if fac is None:
         return q_prev
     _, dL = model.cable_lengths(q_prev)
     q = q_prev.copy()
-    q[model.free] -= fac.solve(dL[:, model.free].T @ du)
+    q[model.free] -= fac.solve(dL[:, model.free].T @ (u - u_prev))
     return q
+
+
+def _nearest_on_a_line(model, history, u):
+    """(axis, xs, qs): the known points nearest to u on one grid line through u, the line with the most
+    of them (up to 6) and, among those, the shortest reach. Along the current line they lie a stride apart,
+    across lines (the same position on the previous lines) one grid step: that one extrapolates best."""
+    hu = np.array([h[0] for h in history])
+    width = np.where(model.u_max > model.u_min, model.u_max - model.u_min, 1.0)
+    best = None
+    for axis in range(u.size):
+        others = np.arange(u.size) != axis
+        on = np.flatnonzero(np.all(hu[:, others] == u[others], axis=1) & (hu[:, axis] != u[axis]))
+        line = {}
+        for k in on[::-1]:  # newest first
+            line.setdefault(float(hu[k, axis]), history[k][1])
+        xs = sorted(line, key=lambda x: abs(x - u[axis]))[:_EXTRAPOLATION_POINTS]
+        if len(xs) < 2:
+            continue
+        key = (-len(xs), max(abs(x - u[axis]) for x in xs) / width[axis])
+        if best is None or key < best[0]:
+            best = (key, axis, xs, [line[x] for x in xs])
+    return None if best is None else best[1:]
+
+
+# Measured on the trunk (docs/methods.md): from exactly solved points one grid step apart, the polynomial
+# through the last 6 leaves a relative residual ~1e-10 (3 points: ~1e-5); through 8 points 8 steps apart,
+# interpolation leaves < 1e-9 -- below the tolerance, so the point needs no Newton step at all.
+_EXTRAPOLATION_POINTS = 6
+_INTERPOLATION_POINTS = 8
+_HISTORY = 128  # Newton points kept: several lines' worth, so a line's first point extrapolates across lines
+# Newton points are what the others are extrapolated and interpolated from: a residual just under the
+# tolerance there would be amplified in those, so Newton goes on to 1 % of it (a quadratic step is cheap).
+_POLISH = 1e-2
 
 
 @dataclass
 class _Sweep:
     """What carries from one point of the sweep to the next."""
 
-    history: list = field(default_factory=list)  # verified (u, q) since the last failure, newest last (<= 3)
+    history: list = field(default_factory=list)  # verified Newton points (u, q) since the last failure, newest last
     fac: object = None  # the last LU, for the tangent predictor at turns
     start: tuple | None = None  # the last verified (q, u), for continuation after a failure
+
+
+def _count(counters, eq):
+    counters["solves"] += 1
+    counters["newton_iterations"] += eq.iterations
+    counters["factorizations"] += eq.factorizations
+    counters["load_steps"] += eq.load_steps
 
 
 def _solve_point(model, u, j, settings, tol, sw: _Sweep, counters):
@@ -130,18 +187,16 @@ def _solve_point(model, u, j, settings, tol, sw: _Sweep, counters):
         else:
             eq = solve_equilibrium(model, u, q0=q0, u0=u0, guess=guess,
                                    fac=sw.fac if settings.reuse_factorization else None,
-                                   tol=settings.tol, max_iter=settings.max_iter)
+                                   tol=tol, max_iter=settings.max_iter, target=_POLISH * tol)
     else:
         if j > 0:
             counters["restarts"] += 1
         q0, u0 = (None, None) if sw.start is None else sw.start
-        eq = solve_equilibrium(model, u, q0=q0, u0=u0, tol=settings.tol, max_iter=settings.max_iter)
-    counters["solves"] += 1
-    counters["newton_iterations"] += eq.iterations
-    counters["factorizations"] += eq.factorizations
-    counters["load_steps"] += eq.load_steps
+        eq = solve_equilibrium(model, u, q0=q0, u0=u0, tol=tol, max_iter=settings.max_iter,
+                               target=_POLISH * tol)
+    _count(counters, eq)
     if eq.status == CONVERGED:
-        sw.history = (sw.history + [(u.copy(), eq.q)])[-3:]
+        sw.history = (sw.history + [(u.copy(), eq.q)])[-_HISTORY:]
         if eq.factorization is not None:  # a point verified without a Newton step keeps the last LU
             sw.fac = eq.factorization
         sw.start = (eq.q, u.copy())
@@ -151,20 +206,81 @@ def _solve_point(model, u, j, settings, tol, sw: _Sweep, counters):
     return eq
 
 
+def line_stride(settings, line_length: int) -> int:
+    """Grid steps between the Newton-solved points of a line (see :attr:`ForwardSettings.stride`)."""
+    if settings.stride is not None:
+        return max(1, int(settings.stride))
+    return int(np.clip(line_length // 12, 1, 8))
+
+
+def _solve_line(model, us, first, settings, tol, sw: _Sweep, counters):
+    """Solve the points of one grid line (in sweep order, the line's actuator varying): every stride-th by
+    Newton, the others by interpolating those and verifying the residual (Newton where that fails)."""
+    n = len(us)
+    stride = line_stride(settings, n) if n > 2 else 1
+    # Newton at the same grid positions on every line (whichever way it runs), so their first iterates can
+    # be extrapolated across the previous lines, one grid step apart
+    grid = set(range(0, n, stride)) | {n - 1}
+    if stride >= 4:  # near the ends the stencil is one-sided, which interpolates less well: halve the gap
+        grid |= {stride // 2, n - 1 - stride // 2}
+    reverse = n > 1 and np.any(us[-1] < us[0])
+    newton = sorted(n - 1 - g for g in grid) if reverse else sorted(grid)
+    out = [None] * n
+    for j in newton:
+        out[j] = _solve_point(model, us[j], first + j, settings, tol, sw, counters)
+    if stride == 1:
+        return out
+    axis = _line_axis(us[0], us[-1])
+    x = us[:, axis]
+    solved = np.array([j for j in newton if out[j].status == CONVERGED])
+    for j in range(n):
+        if out[j] is not None:
+            continue
+        if solved.size == 0:
+            out[j] = _solve_point(model, us[j], first + j, settings, tol, sw, counters)
+            continue
+        near = solved[np.argsort(np.abs(x[solved] - x[j]), kind="stable")[:_INTERPOLATION_POINTS]]
+        guess = sum(w * out[k].q for w, k in zip(lagrange_weights(x[near], x[j]), near))
+        eq = verify(model, us[j], guess, tol)
+        counters["interpolated"] += 1
+        if eq.status != CONVERGED:  # interpolation not good enough here: Newton from it
+            counters["interpolation_failed"] += 1
+            k = near[0]
+            eq = solve_equilibrium(model, us[j], q0=out[k].q, u0=us[k], guess=guess, tol=settings.tol,
+                                   max_iter=settings.max_iter)
+            _count(counters, eq)
+        out[j] = eq
+    return out
+
+
+def verify(model, u, q, tol) -> Equilibrium:
+    """The equilibrium check on its own: q is accepted at u if its relative residual is below ``tol`` and
+    u lies in U (status CONVERGED), else it is returned with status MAX_ITERATIONS (no Newton step taken)."""
+    R, scale = model.residual(q, u, with_scale=True)
+    rel = float(np.linalg.norm(R) / scale)
+    inside = np.all(u >= model.u_min - 1e-12 * np.maximum(1.0, np.abs(model.u_max))) and \
+        np.all(u <= model.u_max + 1e-12 * np.maximum(1.0, np.abs(model.u_max)))
+    ok = rel < tol and inside
+    status = CONVERGED if ok else (OUTSIDE_BOUNDS if rel < tol else MAX_ITERATIONS)
+    return Equilibrium(q, np.array(u, dtype=float), model.tip(q), status, 0, 0, rel, 0, None)
+
+
 def _sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progress=None,
-           resume: dict | None = None, checkpoint=None):
-    """Solve the equilibria at ``us`` in order; returns per-point arrays and counters.
+           resume: dict | None = None, checkpoint=None, line_length: int | None = None):
+    """Solve the equilibria at ``us`` (whole grid lines of ``line_length`` points, default n_d, in sweep
+    order); returns per-point arrays and counters.
 
     ``checkpoint`` (if given) is called with the sweep's state every ``settings.checkpoint_every`` seconds
-    and on Ctrl-C; passing such a state back as ``resume`` continues where it stopped.
+    (at the end of a line) and on Ctrl-C; passing such a state back as ``resume`` continues where it stopped.
     """
     n = len(us)
+    L = max(1, min(int(line_length or settings.n_d), n))
     tips = np.full((n, 3), np.nan)
     status = np.zeros(n, dtype=int)
     residual = np.zeros(n)
     states = np.zeros((n, model.n_dof)) if settings.store_states else None
     counters = dict(solves=0, newton_iterations=0, factorizations=0, load_steps=0, restarts=0,
-                    krylov_iterations=0)
+                    krylov_iterations=0, interpolated=0, interpolation_failed=0)
     tol = model.problem.solver.tolerance if settings.tol is None else settings.tol
     sw = _Sweep()
     first = 0
@@ -199,23 +315,25 @@ def _sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progre
     done = first  # points whose results, history and counters are all recorded
     try:
         with deferred_interrupt() as ctrl_c:
-            for j in range(first, n):
+            for a in range(first, n, L):
+                b = min(a + L, n)
                 snapshot = (list(sw.history), sw.fac, sw.start, dict(counters))
                 try:
-                    eq = _solve_point(model, us[j], j, settings, tol, sw, counters)
-                except KeyboardInterrupt:  # a second Ctrl-C mid-point: forget it, it is solved again on resume
+                    line = _solve_line(model, us[a:b], a, settings, tol, sw, counters)
+                except KeyboardInterrupt:  # a second Ctrl-C mid-line: forget it, it is solved again on resume
                     sw.history, sw.fac, sw.start, counters = snapshot
                     raise
-                tips[j], status[j], residual[j] = eq.tip, eq.status, eq.residual
-                if states is not None and eq.status == CONVERGED:
-                    states[j] = eq.q
-                done = j + 1
+                for j, eq in enumerate(line, start=a):
+                    tips[j], status[j], residual[j] = eq.tip, eq.status, eq.residual
+                    if states is not None and eq.status == CONVERGED:
+                        states[j] = eq.q
+                done = b
                 if progress is not None:
-                    progress(1)
+                    progress(b - a)
                 if checkpoint is not None and time.perf_counter() - last_save > settings.checkpoint_every:
                     checkpoint(state(done))
                     last_save = time.perf_counter()
-                ctrl_c.check()  # Ctrl-C stops here, between points, where the state is complete
+                ctrl_c.check()  # Ctrl-C stops here, between lines, where the state is complete
     except KeyboardInterrupt:
         if checkpoint is not None:
             checkpoint(state(done))
@@ -261,7 +379,7 @@ def _forward(problem, n_d, settings, model, checkpoint_dir=None, resume=False) -
     workers = max(1, min(int(settings.workers), n // 50 or 1))
     fp = fingerprint("forward", model, {k: getattr(settings, k) for k in
                                         ("n_d", "predictor", "reuse_factorization", "krylov", "tol", "max_iter",
-                                         "store_states")} | {"workers": workers})
+                                         "store_states", "stride")} | {"workers": workers})
     saved_meta, saved = ({}, None)
     if resume:
         if checkpoint_dir is None:
@@ -314,7 +432,10 @@ def _parallel(problem, us, settings, workers, bar, saved_meta, saved, save):
     from concurrent.futures import as_completed
 
     n_lines = max(1, len(us) // settings.n_d)
-    pieces = np.array_split(np.arange(len(us)), min(n_lines, 4 * workers))
+    L = settings.n_d
+    # two pieces per worker: each starts cold (~1 s of continuation from rest), so more cost more
+    pieces = [np.arange(lines[0] * L, (lines[-1] + 1) * L)
+              for lines in np.array_split(np.arange(n_lines), min(n_lines, 2 * workers))]
     results = [None] * len(pieces)
     piece_counters = {int(k): v for k, v in saved_meta.get("pieces", {}).items()}
     for i in piece_counters:

@@ -15,7 +15,7 @@ import numpy as np
 import casadi_ws as cw
 from benchlib import best_of, machine, write_section
 from casadi_ws.equilibrium import factorize
-from casadi_ws.forward import ForwardSettings, forward
+from casadi_ws.forward import ForwardSettings, forward, line_stride
 
 
 def main():
@@ -24,6 +24,7 @@ def main():
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--resolution", type=float, default=1.0)
     ap.add_argument("--predictor", default="extrapolate")
+    ap.add_argument("--stride", type=int, default=None, help="default: ForwardSettings' (n_d // 12, <= 8)")
     ap.add_argument("--section", default="forward")
     args = ap.parse_args()
     d = dict(cw.problem.DEFAULT_PROBLEM)
@@ -34,17 +35,19 @@ def main():
     _, K, _ = model.residual_and_tangent(eq.q, [50.0, 50.0])
     b = np.ones(model.n_free)
     t_fac = best_of(lambda: factorize(K).solve(b), 5)
-    res = forward(pb, settings=ForwardSettings(n_d=args.nd, workers=args.workers, predictor=args.predictor,
-                                               progress=True), model=model if args.workers == 1 else None)
+    settings = ForwardSettings(n_d=args.nd, workers=args.workers, predictor=args.predictor, stride=args.stride,
+                               progress=True)
+    res = forward(pb, settings=settings, model=model if args.workers == 1 else None)
     c, t = res.counters, res.timings
-    n = c["solves"]
+    n = c["points"]
+    stride = line_stride(settings, args.nd)
     body = "\n".join([
         f"## Forward method (issue: forward) — `scripts/bench_forward.py --nd {args.nd} --workers {args.workers}`",
         "",
         f"Machine: {machine()}.",
         f"Problem: `trunk_2cables` (corotational, E = 18 MPa, nu = 0.45, gravity), mesh resolution {args.resolution}: "
         f"{pb.mesh.n_nodes} nodes, {pb.mesh.n_tets} tetrahedra, {model.n_free} free dofs; U = [0, 100] N^2, "
-        f"n_d = {args.nd} ({n} equilibria), predictor `{args.predictor}`, tolerance {pb.solver.tolerance:g} "
+        f"n_d = {args.nd} ({n} equilibria), predictor `{args.predictor}`, stride {stride}, tolerance {pb.solver.tolerance:g} "
         f"(relative residual), {args.workers} worker process(es).",
         "",
         "| quantity | value |",
@@ -52,6 +55,7 @@ def main():
         f"| total time (model build + sweep) | {t['total']:.1f} s |",
         f"| sweep time | {t['sweep']:.1f} s |",
         f"| time per point (wall) | {1e3 * t['sweep'] / n:.1f} ms |",
+        f"| points solved by Newton / verified by interpolation (of which then Newton) | {c['solves'] - c['interpolation_failed']} / {c['interpolated']} ({c['interpolation_failed']}) |",
         f"| Newton iterations per point | {c['newton_iterations'] / n:.2f} |",
         f"| LU factorisations per point | {c['factorizations'] / n:.2f} |",
         f"| failed points | {res.n_failed} |",

@@ -139,10 +139,33 @@ def test_checkpoints_survive_failed_points_and_resume_to_the_same_sweep():
     s = ForwardSettings(n_d=4, progress=False, max_iter=1, predictor="none", checkpoint_every=0.0)
     us = input_grid(pb.u_min, pb.u_max, 4)
     saved = []
-    ref = _sweep(m, us, s, checkpoint=lambda st: saved.append(st))  # a checkpoint after every point
-    assert (ref[1] != 0).any() and len(saved) == len(us)
+    ref = _sweep(m, us, s, checkpoint=lambda st: saved.append(st))  # a checkpoint after every grid line
+    assert (ref[1] != 0).any() and len(saved) == len(us) // 4
     assert any(len(st["hist_u"]) == 0 for st in saved)  # states right after a failure are saved too
-    mid = saved[len(us) // 2 - 1]
+    mid = saved[len(saved) // 2 - 1]
     again = _sweep(m, us, s, resume=dict(mid))
     np.testing.assert_array_equal(again[1], ref[1])
     assert np.nanmax(np.abs(again[0] - ref[0])) < 1e-8
+
+
+@pytest.mark.parametrize("n_u, n_d, stride", [(1, 41, 4), (2, 21, 4), (1, 9, 8)])
+def test_points_between_newton_points_match_cold_solves(n_u, n_d, stride):
+    """Interpolated points are accepted only on the residual check: they must be the equilibria that Newton
+    finds from rest. (1, 9, 8): a stride far too coarse, where interpolation fails and Newton takes over."""
+    pb = small_trunk("corotational", n_cables=n_u)
+    model = StaticModel(pb)
+    res = forward(pb, settings=ForwardSettings(n_d=n_d, stride=stride, progress=False), model=model)
+    c = res.counters
+    assert res.n_failed == 0 and res.n_points == n_d**n_u
+    assert c["interpolated"] > 0
+    if n_d == 9:
+        assert c["interpolation_failed"] > 0
+    else:
+        assert c["solves"] < 0.6 * n_d**n_u  # most points needed no Newton step
+    ref = forward(pb, settings=ForwardSettings(n_d=n_d, stride=1, progress=False), model=model)
+    np.testing.assert_array_equal(ref.u, res.u)
+    assert np.abs(ref.points - res.points).max() < 1e-8  # metres
+    rng = np.random.default_rng(0)
+    for k in rng.choice(res.n_points, 4, replace=False):
+        cold = solve_equilibrium(model, res.u[k])
+        assert cold.converged and np.linalg.norm(cold.tip - res.points[k]) < 1e-8
