@@ -150,6 +150,8 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
             dq_bar = -fac.solve(R_try) if np.all(np.isfinite(R_try)) else None
             theta = np.linalg.norm(dq_bar) / size if dq_bar is not None else np.inf
             ok = bool(theta < 1.0 - alpha / 4.0)
+            if not ok and not fresh and np.isfinite(theta):
+                ok = bool(np.linalg.norm(R_try) / scale_try < 1e-2 * rel)
             if ok or not fresh:
                 break
             alpha *= 0.5
@@ -158,7 +160,7 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
         # keep the factorisation while it contracts fast, or slowly but enough to finish in 3 cheap steps
         # (near the tolerance theta measures round-off, and a refactorisation would buy nothing)
         rel_next = np.linalg.norm(R_try) / scale_try if ok else np.inf
-        need_fresh = not (ok and alpha == 1.0 and (theta < 0.25 or (theta < 0.7 and rel_next * theta**3 < tol)))
+        need_fresh = not (ok and alpha == 1.0 and (theta < 0.25 or rel_next < 0.2 * rel or (theta < 0.7 and rel_next * theta**3 < tol)))
         if ok:
             q, R, scale, dq = q_try, R_try, scale_try, dq_bar
 

@@ -24,7 +24,7 @@ solve failed (see :mod:`casadi_ws.backward`).
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -53,11 +53,12 @@ class FBSettings:
     """Step of the relative strategy as a fraction of ||p|| (the publication's 5 %)."""
     backward: BackwardSettings = field(default_factory=BackwardSettings)
     """How the backward problem (8) is solved."""
-    prefilter: float | None = 0.25
+    prefilter: float | None = 0.1
     """Skip a target when the linearised closest point (bounded least squares with Step 1's A) lies more
-    than (0.5 + prefilter) steps from it in some coordinate, i.e. a quarter cell outside the target's cell
-    by default. Over a one-cell move the linearisation errs by ~s^2 x curvature (~0.04 s on the trunk at
-    s = 4 mm), so such a cell is not reached. Recorded as ``prefiltered``. None: off (the paper's rule)."""
+    than (0.5 + prefilter) steps from it in some coordinate, i.e. a tenth of a cell outside the target's
+    cell by default. Over a one-cell move the linearisation errs by ~s^2 x curvature (~0.04 s on the trunk
+    at s = 4 mm), so such a cell is not reached (0.25 and 0.1 reach the same cells on the 2-, 3- and
+    4-cable trunks; BENCHMARKS.md). Recorded as ``prefiltered``. None: off (the paper's rule)."""
     max_cells: int = 200_000
     """Stop (with a note in the counters and a warning in the summary) after the iteration in which this
     many grid points have been explored."""
@@ -203,6 +204,9 @@ def _forward_backward(problem, settings, model, step, checkpoint_dir=None, resum
                                          "timings": timings,
                                          "elapsed": previous + time.perf_counter() - t0}, arrays)
 
+    bsettings = settings.backward
+    if bsettings.give_up is None and bsettings.formulation == "reduced":
+        bsettings = replace(bsettings, give_up=0.05)  # see BackwardSettings.give_up
     pool = _pool(problem, settings.workers) if settings.workers > 1 else None
     interrupt = deferred_interrupt()
     ctrl_c = interrupt.__enter__()  # Ctrl-C stops between configurations; the last iteration's checkpoint stays
@@ -249,7 +253,7 @@ def _forward_backward(problem, settings, model, step, checkpoint_dir=None, resum
 
             # Step 3: backward problem (8) for each kept target, warm-started from its configuration
             t = time.perf_counter()
-            jobs = [(cfg.q, cfg.u, cfg.A, cfg.S, [tg for _, tg in todo], eta, settings.backward)
+            jobs = [(cfg.q, cfg.u, cfg.A, cfg.S, [tg for _, tg in todo], eta, bsettings)
                     for cfg, todo, eta in tasks]
             if pool is None:
                 outs = []

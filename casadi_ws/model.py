@@ -60,7 +60,6 @@ class StaticModel:
         self._stiff = ElementBatch(funs["stiffness"], backend)
         self.backend = self._force.backend
         self._edofs = (3 * mesh.tets[:, :, None] + np.arange(3)[None, None, :]).reshape(-1, 12)
-        self._build_pattern()
 
         # --- loads: lumped gravity and point loads on embedded points
         F = np.zeros(self.n_dof)
@@ -84,6 +83,7 @@ class StaticModel:
         self.n_u = len(self.cables)
         self.u_min = np.array([c.u_min for c in problem.cables], dtype=float)
         self.u_max = np.array([c.u_max for c in problem.cables], dtype=float)
+        self._build_pattern()
 
         # --- end-effector: p_E = C q + p_E(0)
         ee = np.atleast_2d(np.asarray(problem.end_effector, dtype=float))
@@ -96,7 +96,8 @@ class StaticModel:
 
     # ------------------------------------------------------------------ assembly
     def _build_pattern(self):
-        """Index map from element stiffness entries to the CSC data of K on the free dofs."""
+        """Index maps from element stiffness entries and cable-length Hessian entries to the CSC data of K
+        on the free dofs (one pattern for both, so assembling K is a single bincount)."""
         pos = -np.ones(self.n_dof, dtype=np.int64)
         pos[self.free] = np.arange(self.n_free)
         ed = pos[self._edofs]  # (m, 12), -1 for fixed
@@ -104,9 +105,27 @@ class StaticModel:
         j = np.arange(144)
         rows, cols = ed[:, j % 12].ravel(), ed[:, j // 12].ravel()
         keep = (rows >= 0) & (cols >= 0)
-        self._k_keep = np.flatnonzero(keep)
-        key = cols[keep] * self.n_free + rows[keep]
-        ukey, self._k_slot = np.unique(key, return_inverse=True)
+        keys = [cols[keep] * self.n_free + rows[keep]]
+        # cable c adds u_c W^T h_c W (h_c: Hessian of its length in its passage points, row-major 3k x 3k):
+        # every pair of nonzeros of W contributes h_c[a1, a2] w1 w2 to K[i1, i2]
+        self._cable_pairs = []
+        for c in self.cables:
+            Wf = c.W[:, self.free].tocoo()
+            e1, e2 = np.meshgrid(np.arange(Wf.nnz), np.arange(Wf.nnz), indexing="ij")
+            e1, e2 = e1.ravel(), e2.ravel()
+            near = np.abs(Wf.row[e1] // 3 - Wf.row[e2] // 3) <= 1  # a chain's length couples neighbours only
+            e1, e2 = e1[near], e2[near]
+            self._cable_pairs.append((Wf.row[e1] * c.W.shape[0] + Wf.row[e2], Wf.data[e1] * Wf.data[e2]))
+            keys.append(Wf.col[e2].astype(np.int64) * self.n_free + Wf.col[e1])
+        ukey, slot = np.unique(np.concatenate(keys), return_inverse=True)
+        sizes = np.cumsum([0] + [k.size for k in keys])
+        # every element entry has a slot; those of fixed dofs go to one past the end, cut off after the
+        # bincount (cheaper than gathering the kept ones on every assembly)
+        self._k_slot = np.full(keep.size, ukey.size, dtype=np.int64)
+        self._k_slot[keep] = slot[: sizes[1]]
+        self._cable_slots = np.concatenate([slot[a:b] for a, b in zip(sizes[1:-1], sizes[2:])] +
+                                           [np.zeros(0, dtype=np.int64)])
+        self._cable_ranges = list(zip(sizes[1:-1] - sizes[1], sizes[2:] - sizes[1]))
         self._k_rows = (ukey % self.n_free).astype(np.int32)
         ccount = np.bincount(ukey // self.n_free, minlength=self.n_free)
         self._k_indptr = np.concatenate([[0], np.cumsum(ccount)]).astype(np.int32)
@@ -127,7 +146,13 @@ class StaticModel:
     def element_stiffness(self, q: np.ndarray) -> sp.csc_matrix:
         """df_int/dq on the free dofs."""
         ke, = self._stiff(*self._element_inputs(q))
-        data = np.bincount(self._k_slot, weights=ke.ravel()[self._k_keep], minlength=self._k_nnz)
+        return self.assemble(ke)
+
+    def assemble(self, ke: np.ndarray, cable_weights: np.ndarray | None = None) -> sp.csc_matrix:
+        """The free-dof matrix from element matrices ke (m, 144), plus cable Hessian entries if given."""
+        data = np.bincount(self._k_slot, weights=ke.ravel(), minlength=self._k_nnz + 1)[: self._k_nnz]
+        if cable_weights is not None and cable_weights.size:
+            data += np.bincount(self._cable_slots, weights=cable_weights, minlength=self._k_nnz)
         return sp.csc_matrix((data, self._k_rows, self._k_indptr), shape=(self.n_free, self.n_free))
 
     def cable_lengths(self, q: np.ndarray, hessians: bool = False):
@@ -165,13 +190,20 @@ class StaticModel:
     def residual_and_tangent(self, q: np.ndarray, u: np.ndarray, load: float = 1.0):
         """(R, K, dR/du) on the free dofs; K = dR/dq includes the cables' geometric stiffness."""
         u = np.asarray(u, dtype=float)
-        _, dL, H2 = self.cable_lengths(q, hessians=True)
-        R = (self.internal_force(q) + dL.T @ u - load * self.F)[self.free]
-        K = self.element_stiffness(q)
-        for ui, Hi in zip(u, H2):
-            if ui != 0.0:
-                K = K + ui * Hi
-        return R, K.tocsc(), dL[:, self.free].T
+        x = self.X + q
+        dL = np.empty((self.n_u, self.n_dof))
+        weights = np.zeros(self._cable_slots.size)
+        for i, c in enumerate(self.cables):
+            _, gi, hi = c.fun(c.W @ x, c.pull)
+            dL[i] = c.W.T @ np.asarray(gi).ravel()
+            ab, w = self._cable_pairs[i]
+            a, b = self._cable_ranges[i]
+            weights[a:b] = u[i] * w * np.asarray(hi).ravel()[ab]
+        inputs = self._element_inputs(q)
+        fe, ke = self._force(*inputs)[0], self._stiff(*inputs)[0]
+        R = (np.bincount(self._edofs.ravel(), weights=fe.ravel(), minlength=self.n_dof) + dL.T @ u
+             - load * self.F)[self.free]
+        return R, self.assemble(ke, weights), dL[:, self.free].T
 
     def actuation_matrix(self, q: np.ndarray) -> np.ndarray:
         """H(q) = -dL/dq on the free dofs, (n_u, n_free)."""

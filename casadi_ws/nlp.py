@@ -118,8 +118,7 @@ class FullSpaceNLP:
         lam[m.free] = lam_g
         ue, Xe, Ge, Pe = m._element_inputs(q)
         he, = self._hv(ue, Xe, Ge, Pe, lam[m._edofs])
-        data = np.bincount(m._k_slot, weights=he.ravel()[m._k_keep], minlength=m._k_nnz)
-        Hqq = sp.csc_matrix((data, m._k_rows, m._k_indptr), shape=(self.nq, self.nq))
+        Hqq = m.assemble(he)
         Hqq = 0.5 * (Hqq + Hqq.T)
         x = m.X + q
         cols = []

@@ -45,7 +45,7 @@ def main():
         f"Machine: {machine()}.",
         f"Problems: `problems/trunk_{{2,3,4}}cables.yaml` (1029 nodes, 4320 tetrahedra, corotational, gravity), "
         f"uniform grid step s_Ed = {args.step * 1e3:g} mm, {args.workers} worker process(es), default settings "
-        f"(prefilter 0.25 cell, reduced solves stop inside the cell; see docs/methods.md).",
+        f"(prefilter 0.1 cell, reduced solves stop inside the cell or give up 0.05 cell outside it; see docs/methods.md).",
         "",
         "| n_u | backward | time (s) | iterations | explored W_Ed | feasible W_Es | backward solves | equilibrium solves | ms / explored point | step 1 / 3 (s) | publication: time, iterations, W_Ed, W_Es |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
