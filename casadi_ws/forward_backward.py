@@ -261,7 +261,12 @@ def _forward_backward(problem, settings, model, step, checkpoint_dir=None, resum
                     outs.append(_expand(model, *j))
                     ctrl_c.check()
             else:
-                outs = list(pool.map(_worker_expand, jobs))
+                # the configurations with the most targets first, so no worker is left with a long one at
+                # the end of the iteration (the results are put back in order: same result as 1 worker)
+                order = sorted(range(len(jobs)), key=lambda i: -len(jobs[i][4]))
+                outs = [None] * len(jobs)
+                for i, out in zip(order, pool.map(_worker_expand, [jobs[i] for i in order])):
+                    outs[i] = out
                 ctrl_c.check()
             new_frontier = []
             for (cfg, todo, eta), out in zip(tasks, outs):
