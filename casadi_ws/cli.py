@@ -124,8 +124,11 @@ def cmd_solve(args) -> int:
             raise UsageError(f"--nd: {args.nd}^{problem.n_u} = {args.nd ** problem.n_u:.3g} equilibria; "
                              f"pass --force to run that many")
         out = _prepare_out(args.out, args.overwrite, args.resume)
+        if args.stride is not None and args.stride < 1:
+            raise UsageError(f"--stride: expected an integer >= 1, got {args.stride}")
         settings = ForwardSettings(n_d=args.nd, workers=args.workers, progress=not args.quiet,
-                                   store_states=args.store_states, checkpoint_every=args.checkpoint_every)
+                                   store_states=args.store_states, checkpoint_every=args.checkpoint_every,
+                                   stride=args.stride)
         run = lambda: forward(problem, settings=settings, checkpoint_dir=out, resume=args.resume)  # noqa: E731
     else:
         from .backward import BackwardSettings
@@ -257,6 +260,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="forward (grid of U; the default) or fb (forward-backward, grid of the end-effector space)")
     s.add_argument("--nd", type=int, default=None, help="forward: values per actuator, n_d^n_u equilibria (11)")
     s.add_argument("--workers", type=int, default=None, help="parallel processes, forward and fb (1)")
+    s.add_argument("--stride", type=int, default=None,
+                   help="forward: Newton every STRIDE-th point of a grid line, the others interpolated and "
+                        "verified (n_d // 12, at most 8; 1: Newton everywhere)")
     s.add_argument("--step", type=float, default=None, help="fb: grid step s_Ed in metres (0.004)")
     s.add_argument("--strategy", choices=["uniform", "relative"], default=None, help="fb: discretisation (uniform)")
     s.add_argument("--backward", choices=["reduced", "ipopt"], default=None, help="fb: backward solver (reduced)")

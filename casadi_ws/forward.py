@@ -26,13 +26,13 @@ from pathlib import Path
 import numpy as np
 
 from .checkpoint import CHECKPOINT, fingerprint, load_checkpoint, save_checkpoint
-from .equilibrium import (CONVERGED, MAX_ITERATIONS, OUTSIDE_BOUNDS, Equilibrium, Factorization, factorize, newton_krylov,
-                          solve_equilibrium)
+from .equilibrium import (CONVERGED, OUTSIDE_BOUNDS, Equilibrium, Factorization, factorize, inside_bounds,
+                          newton_krylov, solve_equilibrium, verify)
 from .model import StaticModel
 from .parallel import deferred_interrupt, one_blas_thread, process_pool
 from .result import WorkspaceResult
 
-__all__ = ["ForwardSettings", "forward", "input_grid", "lagrange_weights", "line_stride", "snake_order", "verify"]
+__all__ = ["ForwardSettings", "forward", "input_grid", "lagrange_weights", "line_stride", "snake_order"]
 
 
 @dataclass
@@ -181,9 +181,8 @@ def _solve_point(model, u, j, settings, tol, sw: _Sweep, counters):
         if nk is not None:
             q_nk, rel, n_kry = nk
             counters["krylov_iterations"] += n_kry
-            inside = np.all(u >= model.u_min - 1e-12) and np.all(u <= model.u_max + 1e-12)
-            eq = Equilibrium(q_nk, u.copy(), model.tip(q_nk), CONVERGED if inside else OUTSIDE_BOUNDS, 1, 0,
-                             rel, 0, sw.fac)
+            status = CONVERGED if inside_bounds(model, u) else OUTSIDE_BOUNDS
+            eq = Equilibrium(q_nk, u.copy(), model.tip(q_nk), status, 1, 0, rel, 0, sw.fac)
         else:
             eq = solve_equilibrium(model, u, q0=q0, u0=u0, guess=guess,
                                    fac=sw.fac if settings.reuse_factorization else None,
@@ -246,23 +245,11 @@ def _solve_line(model, us, first, settings, tol, sw: _Sweep, counters):
         if eq.status != CONVERGED:  # interpolation not good enough here: Newton from it
             counters["interpolation_failed"] += 1
             k = near[0]
-            eq = solve_equilibrium(model, us[j], q0=out[k].q, u0=us[k], guess=guess, tol=settings.tol,
+            eq = solve_equilibrium(model, us[j], q0=out[k].q, u0=us[k], guess=guess, tol=tol,
                                    max_iter=settings.max_iter)
             _count(counters, eq)
         out[j] = eq
     return out
-
-
-def verify(model, u, q, tol) -> Equilibrium:
-    """The equilibrium check on its own: q is accepted at u if its relative residual is below ``tol`` and
-    u lies in U (status CONVERGED), else it is returned with status MAX_ITERATIONS (no Newton step taken)."""
-    R, scale = model.residual(q, u, with_scale=True)
-    rel = float(np.linalg.norm(R) / scale)
-    inside = np.all(u >= model.u_min - 1e-12 * np.maximum(1.0, np.abs(model.u_max))) and \
-        np.all(u <= model.u_max + 1e-12 * np.maximum(1.0, np.abs(model.u_max)))
-    ok = rel < tol and inside
-    status = CONVERGED if ok else (OUTSIDE_BOUNDS if rel < tol else MAX_ITERATIONS)
-    return Equilibrium(q, np.array(u, dtype=float), model.tip(q), status, 0, 0, rel, 0, None)
 
 
 def _sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progress=None,

@@ -11,13 +11,25 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import numpy as np
+
 import casadi_ws as cw
-from benchlib import machine, write_section
+from benchlib import best_of, machine, write_section
 from casadi_ws.backward import BackwardSettings
 from casadi_ws.forward_backward import FBSettings, forward_backward
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = {2: (757, 37, 1680, 635), 3: (2063, 44, 5466, 1941), 4: (3733, 42, 10626, 3667)}
+
+
+def reference_lu(model) -> float:
+    """Seconds for one LU factorisation + solve of K at u = u_min (best of 5): the machine's speed today."""
+    from casadi_ws.equilibrium import factorize
+
+    eq = cw.solve_equilibrium(model, model.u_min)
+    _, K, _ = model.residual_and_tangent(eq.q, model.u_min)
+    b = np.ones(model.n_free)
+    return best_of(lambda: factorize(K).solve(b), 5)
 
 
 def main():
@@ -29,9 +41,11 @@ def main():
     ap.add_argument("--section", default="fb")
     args = ap.parse_args()
     rows = []
+    lu_ms = []
     for n in args.problems:
         pb = cw.load_problem(ROOT / "problems" / f"trunk_{n}cables.yaml")
         model = cw.StaticModel(pb)
+        lu_ms.append(1e3 * reference_lu(model))
         for form in args.backward:
             s = FBSettings(step=args.step, backward=BackwardSettings(formulation=form), progress=False,
                            workers=args.workers)
@@ -46,6 +60,8 @@ def main():
         f"Problems: `problems/trunk_{{2,3,4}}cables.yaml` (1029 nodes, 4320 tetrahedra, corotational, gravity), "
         f"uniform grid step s_Ed = {args.step * 1e3:g} mm, {args.workers} worker process(es), default settings "
         f"(prefilter 0.1 cell, reduced solves stop inside the cell or give up 0.05 cell outside it; see docs/methods.md).",
+        f"This shared machine's speed varies by up to ~30 % between runs: one LU factorisation + solve of K, "
+        f"measured in this run before each scenario, took {' / '.join(f'{t:.1f}' for t in lu_ms)} ms.",
         "",
         "| n_u | backward | time (s) | iterations | explored W_Ed | feasible W_Es | backward solves | equilibrium solves | ms / explored point | step 1 / 3 (s) | publication: time, iterations, W_Ed, W_Es |",
         "|---|---|---|---|---|---|---|---|---|---|---|",

@@ -128,6 +128,8 @@ def test_cli_solve_writes_files_and_refuses_to_overwrite(tmp_path):
         assert (out / f).is_file(), f
     r = subprocess.run(cmd, capture_output=True, text=True)
     assert r.returncode == 2 and "--overwrite" in r.stderr
+    r = subprocess.run(cmd[:-3] + ["--stride", "0", "--out", str(tmp_path / "s0")], capture_output=True, text=True)
+    assert r.returncode == 2 and "--stride: expected an integer >= 1, got 0" in r.stderr
 
 
 def test_checkpoints_survive_failed_points_and_resume_to_the_same_sweep():
