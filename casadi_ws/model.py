@@ -136,31 +136,30 @@ class StaticModel:
         rows, cols = ed[:, j % 12].ravel(), ed[:, j // 12].ravel()
         keep = (rows >= 0) & (cols >= 0)
         keys = [cols[keep] * self.n_free + rows[keep]]
-        # cable c adds u_c W^T h_c W (h_c: Hessian of its length in its passage points, row-major 3k x 3k):
-        # every pair of nonzeros of W contributes h_c[a1, a2] w1 w2 to K[i1, i2]
-        self._cable_pairs = []
-        for c in self.cables:
+        # cable c adds u_c W^T h_c W (h_c: Hessian of its length in its passage points, 3k x 3k, stored
+        # after the previous cables' in the stacked vector of _cable_terms): every pair of nonzeros of W
+        # contributes h_c[a1, a2] w1 w2 to K[i1, i2]
+        h_index, h_weight, h_cable = [], [], []
+        for i, c in enumerate(self.cables):
             Wf = c.W[:, self.free].tocoo()
             e1, e2 = np.meshgrid(np.arange(Wf.nnz), np.arange(Wf.nnz), indexing="ij")
             e1, e2 = e1.ravel(), e2.ravel()
             near = np.abs(Wf.row[e1] // 3 - Wf.row[e2] // 3) <= 1  # a chain's length couples neighbours only
             e1, e2 = e1[near], e2[near]
-            self._cable_pairs.append((Wf.row[e1] * c.W.shape[0] + Wf.row[e2], Wf.data[e1] * Wf.data[e2]))
-            self._cable_pairs[-1] = (self._cable_pairs[-1][0] + self._h_offsets[len(self._cable_pairs) - 1],
-                                     self._cable_pairs[-1][1])
+            h_index.append(self._h_offsets[i] + Wf.row[e1] * c.W.shape[0] + Wf.row[e2])
+            h_weight.append(Wf.data[e1] * Wf.data[e2])
+            h_cable.append(np.full(e1.size, i))
             keys.append(Wf.col[e2].astype(np.int64) * self.n_free + Wf.col[e1])
         ukey, slot = np.unique(np.concatenate(keys), return_inverse=True)
-        sizes = np.cumsum([0] + [k.size for k in keys])
         # every element entry has a slot; those of fixed dofs go to one past the end, cut off after the
         # bincount (cheaper than gathering the kept ones on every assembly)
+        n_el = keys[0].size
         self._k_slot = np.full(keep.size, ukey.size, dtype=np.int64)
-        self._k_slot[keep] = slot[: sizes[1]]
-        self._cable_slots = np.concatenate([slot[a:b] for a, b in zip(sizes[1:-1], sizes[2:])] +
-                                           [np.zeros(0, dtype=np.int64)])
-        self._cable_h_index = np.concatenate([ab for ab, _ in self._cable_pairs] + [np.zeros(0, dtype=np.int64)])
-        self._cable_h_weight = np.concatenate([w for _, w in self._cable_pairs] + [np.zeros(0)])
-        self._cable_of_entry = np.concatenate([np.full(ab.size, i) for i, (ab, _) in enumerate(self._cable_pairs)]
-                                              + [np.zeros(0, dtype=np.int64)])
+        self._k_slot[keep] = slot[:n_el]
+        self._cable_slots = slot[n_el:]
+        self._cable_h_index = np.concatenate(h_index + [np.zeros(0, dtype=np.int64)])
+        self._cable_h_weight = np.concatenate(h_weight + [np.zeros(0)])
+        self._cable_of_entry = np.concatenate(h_cable + [np.zeros(0, dtype=np.int64)])
         self._k_rows = (ukey % self.n_free).astype(np.int32)
         ccount = np.bincount(ukey // self.n_free, minlength=self.n_free)
         self._k_indptr = np.concatenate([[0], np.cumsum(ccount)]).astype(np.int32)
