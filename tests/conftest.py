@@ -1,4 +1,6 @@
 import os
+import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -40,3 +42,16 @@ def small_trunk(model="corotational", n_cables=2, gravity=True, resolution=0.5):
 @pytest.fixture
 def rng():
     return np.random.default_rng(1234)
+
+
+def coarse_problem_file(tmp_path):
+    """The shipped 2-cable trunk at mesh resolution 0.5, written to tmp_path (for command-line tests)."""
+    text = (REPO / "problems" / "trunk_2cables.yaml").read_text().replace("resolution: 1.0", "resolution: 0.5")
+    p = tmp_path / "coarse.yaml"
+    p.write_text(text)
+    return p
+
+
+def run_cli(*args):
+    """``casadi-ws ARGS`` in a subprocess, output captured."""
+    return subprocess.run([sys.executable, "-m", "casadi_ws.cli", *map(str, args)], capture_output=True, text=True)

@@ -1,11 +1,9 @@
 """The forward-backward method: Theorem 1, agreement with the forward method, verified points."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
-from conftest import REPO, small_trunk
+from conftest import coarse_problem_file, run_cli, small_trunk
 
 from casadi_ws import StaticModel, solve_equilibrium
 from casadi_ws.backward import BackwardSettings, backward
@@ -128,11 +126,8 @@ def test_unreachable_target_is_not_reached():
 
 
 def test_cli_fb_and_compare(tmp_path):
-    text = (REPO / "problems" / "trunk_2cables.yaml").read_text().replace("resolution: 1.0", "resolution: 0.5")
-    prob = tmp_path / "coarse.yaml"
-    prob.write_text(text)
-    run = lambda *a: subprocess.run([sys.executable, "-m", "casadi_ws.cli", *map(str, a)], capture_output=True,
-                                    text=True)
+    prob = coarse_problem_file(tmp_path)
+    run = run_cli
     r = run("solve", prob, "--method", "fb", "--step", "0.015", "--out", tmp_path / "fb", "--quiet")
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "fb" / "cells.vtu").is_file()

@@ -1,10 +1,8 @@
 """Inverse control: reach and follow, checked against forward solves."""
 
-import subprocess
-import sys
 
 import numpy as np
-from conftest import REPO, small_trunk
+from conftest import coarse_problem_file, run_cli, small_trunk
 
 from casadi_ws import StaticModel, solve_equilibrium
 from casadi_ws.forward import ForwardSettings, forward
@@ -62,11 +60,8 @@ def test_regularization_and_change_limit():
 
 
 def test_cli_reach_and_follow(tmp_path):
-    text = (REPO / "problems" / "trunk_2cables.yaml").read_text().replace("resolution: 1.0", "resolution: 0.5")
-    prob = tmp_path / "coarse.yaml"
-    prob.write_text(text)
-    run = lambda *a: subprocess.run([sys.executable, "-m", "casadi_ws.cli", *map(str, a)], capture_output=True,
-                                    text=True)
+    prob = coarse_problem_file(tmp_path)
+    run = run_cli
     import json
 
     r = run("reach", prob, "--target", "0.5,0.5,0.5", "--compact")

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from conftest import REPO
+from conftest import REPO, coarse_problem_file
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -104,11 +104,7 @@ def test_grid_step_too_small_needs_force(tmp_path, capsys):
 
 # ---------------------------------------------------------------------------------------------------- resume
 
-def _coarse_problem(tmp_path):
-    text = (REPO / "problems" / "trunk_2cables.yaml").read_text().replace("resolution: 1.0", "resolution: 0.5")
-    p = tmp_path / "coarse.yaml"
-    p.write_text(text)
-    return p
+_coarse_problem = coarse_problem_file
 
 
 def _cli(*args):
