@@ -33,14 +33,14 @@ def _parse_u(text: str, n_u: int) -> np.ndarray:
 
 
 def _load(path: str | None):
-    from .problem import default_problem, load_problem
+    from .io.problem import default_problem, load_problem
 
     return default_problem() if path is None else load_problem(path)
 
 
 def cmd_equilibrium(args) -> int:
-    from .equilibrium import solve_equilibrium
-    from .model import StaticModel
+    from .solvers.equilibrium import solve_equilibrium
+    from .fem.model import StaticModel
 
     problem = _load(args.problem)
     u = _parse_u(args.u, problem.n_u)
@@ -52,7 +52,7 @@ def cmd_equilibrium(args) -> int:
 
 
 def _prepare_out(path: str, overwrite: bool, resume: bool = False) -> Path:
-    from .checkpoint import CHECKPOINT
+    from .runtime.run_state import CHECKPOINT
 
     out = Path(path)
     if resume:
@@ -89,7 +89,7 @@ def _check_step(problem, step: float, force: bool) -> None:
 
 def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
     """Result files plus the three-view and 3-D pictures into ``out``."""
-    from .plots import three_views, workspace_3d
+    from .io.plots import three_views, workspace_3d
 
     result.save(out)
     three_views(result, out / "three_views.png", problem.mesh, title=f"{problem.name}: {result.method} workspace")
@@ -116,7 +116,7 @@ def cmd_solve(args) -> int:
     if args.workers < 1:
         raise UsageError(f"--workers: expected an integer >= 1, got {args.workers}")
     if args.method == "forward":
-        from .forward import ForwardSettings, forward
+        from .workspace.forward import ForwardSettings, forward
 
         if args.nd < 1:
             raise UsageError(f"--nd: expected an integer >= 1, got {args.nd}")
@@ -131,8 +131,8 @@ def cmd_solve(args) -> int:
                                    stride=args.stride)
         run = lambda: forward(problem, settings=settings, checkpoint_dir=out, resume=args.resume)  # noqa: E731
     else:
-        from .backward import BackwardSettings
-        from .forward_backward import FBSettings, forward_backward
+        from .workspace.backward import BackwardSettings
+        from .workspace.forward_backward import FBSettings, forward_backward
 
         _check_step(problem, args.step, args.force)
         out = _prepare_out(args.out, args.overwrite, args.resume)
@@ -151,9 +151,9 @@ def cmd_solve(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from .compare import compare
-    from .plots import three_views
-    from .result import load_result
+    from .workspace.compare import compare
+    from .io.plots import three_views
+    from .workspace.result import load_result
 
     results = []
     for d in (args.a, args.b):
@@ -178,7 +178,7 @@ def _parse_point(text: str, flag: str) -> np.ndarray:
 
 
 def _reach_settings(args):
-    from .inverse import ReachSettings
+    from .control.inverse import ReachSettings
 
     if args.max_du is not None and not args.max_du > 0:
         raise UsageError(f"--max-du: expected a positive number of newtons, got {args.max_du}")
@@ -188,7 +188,7 @@ def _reach_settings(args):
 
 
 def cmd_reach(args) -> int:
-    from .inverse import reach
+    from .control.inverse import reach
 
     problem = _load(args.problem)
     target = _parse_point(args.target, "--target")
@@ -199,9 +199,9 @@ def cmd_reach(args) -> int:
 
 
 def cmd_follow(args) -> int:
-    from .inverse import follow
-    from .plots import three_views
-    from .result import WorkspaceResult
+    from .control.inverse import follow
+    from .io.plots import three_views
+    from .workspace.result import WorkspaceResult
 
     problem = _load(args.problem)
     path = Path(args.targets)
@@ -231,8 +231,8 @@ def cmd_follow(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    from .forward import ForwardSettings, forward
-    from .problem import default_problem
+    from .workspace.forward import ForwardSettings, forward
+    from .io.problem import default_problem
 
     problem = default_problem()
     print(f"casadi-ws demo: forward workspace of the built-in '{problem.name}' ({problem.mesh.n_nodes} nodes, "
@@ -309,8 +309,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .mesh import MeshError
-    from .problem import ProblemError
+    from .fem.mesh import MeshError
+    from .io.problem import ProblemError
 
     args = build_parser().parse_args(argv)
     try:

@@ -15,8 +15,8 @@ import numpy as np
 
 import casadi_ws as cw
 from benchlib import best_of, machine, write_section
-from casadi_ws.backward import BackwardSettings
-from casadi_ws.forward_backward import FBSettings, forward_backward
+from casadi_ws.workspace.backward import BackwardSettings
+from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = {2: (757, 37, 1680, 635), 3: (2063, 44, 5466, 1941), 4: (3733, 42, 10626, 3667)}
@@ -24,7 +24,7 @@ PAPER = {2: (757, 37, 1680, 635), 3: (2063, 44, 5466, 1941), 4: (3733, 42, 10626
 
 def reference_lu(model) -> float:
     """Seconds for one LU factorisation + solve of K at u = u_min (best of 5): the machine's speed today."""
-    from casadi_ws.equilibrium import factorize
+    from casadi_ws.solvers.equilibrium import factorize
 
     eq = cw.solve_equilibrium(model, model.u_min)
     _, K, _ = model.residual_and_tangent(eq.q, model.u_min)

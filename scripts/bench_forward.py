@@ -13,9 +13,10 @@ import argparse
 import numpy as np
 
 import casadi_ws as cw
+from casadi_ws.io.problem import DEFAULT_PROBLEM
 from benchlib import best_of, machine, write_section
-from casadi_ws.equilibrium import factorize
-from casadi_ws.forward import ForwardSettings, forward, line_stride
+from casadi_ws.solvers.equilibrium import factorize
+from casadi_ws.workspace.forward import ForwardSettings, forward, line_stride
 
 
 def main():
@@ -27,7 +28,7 @@ def main():
     ap.add_argument("--stride", type=int, default=None, help="default: ForwardSettings' (n_d // 12, <= 8)")
     ap.add_argument("--section", default="forward")
     args = ap.parse_args()
-    d = dict(cw.problem.DEFAULT_PROBLEM)
+    d = dict(DEFAULT_PROBLEM)
     d["mesh"] = {**d["mesh"], "resolution": args.resolution}
     pb = cw.problem_from_dict(d, "problems/trunk_2cables.yaml")
     model = cw.StaticModel(pb)

@@ -14,12 +14,13 @@ import time
 import numpy as np
 
 import casadi_ws as cw
+from casadi_ws.io.problem import DEFAULT_PROBLEM
 from benchlib import best_of, machine, write_section
-from casadi_ws.equilibrium import factorize
+from casadi_ws.solvers.equilibrium import factorize
 
 
 def measure(resolution: float, model_name: str) -> dict:
-    d = dict(cw.problem.DEFAULT_PROBLEM)
+    d = dict(DEFAULT_PROBLEM)
     d["mesh"] = {**d["mesh"], "resolution": resolution}
     d["material"] = {**d["material"], "model": model_name}
     pb = cw.problem_from_dict(d, "<bench>")

@@ -26,11 +26,11 @@ from pathlib import Path
 import numpy as np
 
 import casadi_ws as cw
-from casadi_ws.compare import compare
-from casadi_ws.forward import ForwardSettings, _sweep, forward
-from casadi_ws.forward_backward import FBSettings, forward_backward
-from casadi_ws.parallel import one_blas_thread
-from casadi_ws.plots import three_views
+from casadi_ws.workspace.compare import compare
+from casadi_ws.workspace.forward import ForwardSettings, _sweep, forward
+from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
+from casadi_ws.runtime.executor import one_blas_thread
+from casadi_ws.io.plots import three_views
 
 ROOT = Path(__file__).resolve().parents[1]
 # Table 1 of the publication: forward operations, FB feasible points, forward time (s), FB time (s)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from casadi_ws import Cable, Material, Problem, box_mesh, trunk_cable, trunk_mesh
-from casadi_ws.problem import nodes_in_box, nodes_on_plane
+from casadi_ws.io.problem import nodes_in_box, nodes_on_plane
 
 # compiled element kernels are cached per machine; keep the tests' cache out of the user's home if asked
 os.environ.setdefault("CASADI_WS_CACHE", str(Path(tempfile.gettempdir()) / "casadi-ws-test-cache"))

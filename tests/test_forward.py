@@ -10,9 +10,9 @@ import pyvista as pv
 from conftest import REPO, small_trunk
 
 from casadi_ws import StaticModel, solve_equilibrium
-from casadi_ws.equilibrium import factorize
-from casadi_ws.forward import ForwardSettings, forward, input_grid, snake_order
-from casadi_ws.result import load_result
+from casadi_ws.solvers.equilibrium import factorize
+from casadi_ws.workspace.forward import ForwardSettings, forward, input_grid, snake_order
+from casadi_ws.workspace.result import load_result
 
 
 def test_snake_order_visits_every_grid_point_once_by_unit_steps():
@@ -133,7 +133,7 @@ def test_cli_solve_writes_files_and_refuses_to_overwrite(tmp_path):
 
 
 def test_checkpoints_survive_failed_points_and_resume_to_the_same_sweep():
-    from casadi_ws.forward import _sweep
+    from casadi_ws.workspace.forward import _sweep
 
     pb = small_trunk("corotational", n_cables=2)
     pb.solver.max_load_steps = 2

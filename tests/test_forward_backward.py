@@ -6,12 +6,13 @@ import numpy as np
 from conftest import coarse_problem_file, run_cli, small_trunk
 
 from casadi_ws import StaticModel, solve_equilibrium
-from casadi_ws.backward import BackwardSettings, backward
-from casadi_ws.compare import compare
-from casadi_ws.equilibrium import Factorization, factorize
-from casadi_ws.forward import ForwardSettings, forward
-from casadi_ws.forward_backward import FBSettings, forward_backward
-from casadi_ws.interval import NEIGHBOURS, Grid, bounded_step, interval_box, neighbourhood, sensitivity
+from casadi_ws.workspace.backward import BackwardSettings, backward
+from casadi_ws.workspace.compare import compare
+from casadi_ws.solvers.equilibrium import Factorization, factorize
+from casadi_ws.workspace.forward import ForwardSettings, forward
+from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
+from casadi_ws.solvers.sensitivity import bounded_step, sensitivity
+from casadi_ws.workspace.interval import NEIGHBOURS, Grid, interval_box, neighbourhood
 
 
 def test_theorem1_box_contains_the_linear_image_and_is_tight(rng):
@@ -143,7 +144,7 @@ def test_cli_fb_and_compare(tmp_path):
 
 
 def test_full_space_nlp_derivatives_match_finite_differences(rng):
-    from casadi_ws.nlp import FullSpaceNLP
+    from casadi_ws.nlp.formulations import FullSpaceNLP
 
     pb = small_trunk("corotational", n_cables=2)
     m = StaticModel(pb)

@@ -5,8 +5,8 @@ import numpy as np
 from conftest import coarse_problem_file, run_cli, small_trunk
 
 from casadi_ws import StaticModel, solve_equilibrium
-from casadi_ws.forward import ForwardSettings, forward
-from casadi_ws.inverse import ReachSettings, follow, reach
+from casadi_ws.workspace.forward import ForwardSettings, forward
+from casadi_ws.control.inverse import ReachSettings, follow, reach
 
 
 def test_round_trip_random_inputs(rng):
@@ -78,7 +78,7 @@ def test_cli_reach_and_follow(tmp_path):
 
 def test_orientation_with_extra_points_round_trip(rng):
     """Three points around the tip fix its position and orientation (the publication's Section 7)."""
-    from casadi_ws.mesh import embed
+    from casadi_ws.fem.mesh import embed
 
     pb = small_trunk("corotational", n_cables=2)
     m = StaticModel(pb)

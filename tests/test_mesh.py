@@ -7,8 +7,8 @@ from conftest import SHARED
 
 from casadi_ws import Cable, Material, MeshError, Problem, StaticModel, box_mesh, load_mesh, trunk_mesh
 from casadi_ws import solve_equilibrium, trunk_cable
-from casadi_ws.mesh import embed
-from casadi_ws.problem import nodes_in_box, tip_centre
+from casadi_ws.fem.mesh import embed
+from casadi_ws.io.problem import nodes_in_box, tip_centre
 
 needs_shared = pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/meshes not present")
 

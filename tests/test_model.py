@@ -6,8 +6,8 @@ import scipy.sparse.linalg as sla
 from conftest import small_trunk
 
 from casadi_ws import Material, Problem, StaticModel, box_mesh
-from casadi_ws.jit import ElementBatch, have_compiler
-from casadi_ws.material import MATERIAL_MODELS, element_functions, rest_geometry
+from casadi_ws.fem.kernels import ElementBatch, have_compiler
+from casadi_ws.fem.materials import MATERIAL_MODELS, element_functions, rest_geometry
 
 MODELS = list(MATERIAL_MODELS)
 

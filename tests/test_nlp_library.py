@@ -5,7 +5,7 @@ import scipy.sparse as sp
 from conftest import small_trunk
 
 from casadi_ws import StaticModel, solve_equilibrium
-from casadi_ws.nlp import TrackingNLP
+from casadi_ws.nlp.formulations import TrackingNLP
 
 
 class ShortCablesNLP(TrackingNLP):

@@ -10,7 +10,7 @@ import yaml
 from conftest import REPO
 
 from casadi_ws import ProblemError, default_problem, load_problem, problem_from_dict
-from casadi_ws.problem import DEFAULT_PROBLEM
+from casadi_ws.io.problem import DEFAULT_PROBLEM
 
 PROBLEMS = sorted((REPO / "problems").glob("trunk_*cables.yaml"))
 

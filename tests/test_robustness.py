@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from casadi_ws import ProblemError, load_problem, problem_from_dict
 from casadi_ws.cli import main
-from casadi_ws.result import load_result
+from casadi_ws.workspace.result import load_result
 
 BAD = Path(__file__).parent / "bad_inputs"
 CASES = sorted(BAD.glob("*.yaml"))

@@ -16,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from .actuators import Cable, trunk_cable
-from .material import MATERIAL_MODELS, Material
-from .mesh import Mesh, MeshError, box_mesh, embed, load_mesh, trunk_mesh
+from ..actuation.cable import Cable, trunk_cable
+from ..fem.materials import MATERIAL_MODELS, Material
+from ..fem.mesh import Mesh, MeshError, box_mesh, embed, load_mesh, trunk_mesh
 
 __all__ = [
     "Problem",

@@ -25,12 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .checkpoint import CHECKPOINT, fingerprint, load_checkpoint, save_checkpoint
-from .equilibrium import (CONVERGED, OUTSIDE_BOUNDS, Equilibrium, Factorization, factorize, inside_bounds,
+from ..runtime.run_state import CHECKPOINT, fingerprint, load_checkpoint, save_checkpoint
+from ..solvers.equilibrium import (CONVERGED, OUTSIDE_BOUNDS, Equilibrium, Factorization, factorize, inside_bounds,
                           newton_krylov, solve_equilibrium, verify)
-from .model import StaticModel
-from .parallel import deferred_interrupt, one_blas_thread, process_pool
-from .result import WorkspaceResult
+from ..fem.model import StaticModel
+from ..runtime.executor import deferred_interrupt, one_blas_thread, process_pool
+from .result import WorkspaceResult, describe
 
 __all__ = ["ForwardSettings", "forward", "input_grid", "lagrange_weights", "line_stride", "snake_order"]
 
@@ -47,7 +47,7 @@ class ForwardSettings:
     """Try chord steps with the previous point's LU before refactorising (pays off for linear materials)."""
     krylov: bool = False
     """Newton with the exact tangent solved by GMRES, preconditioned by the last LU; a fresh LU only when
-    GMRES needs more than 12 iterations (see :func:`casadi_ws.equilibrium.newton_krylov`). On the 1029-node
+    GMRES needs more than 12 iterations (see :func:`casadi_ws.solvers.equilibrium.newton_krylov`). On the 1029-node
     trunk it saves 9 LUs in 10 but costs as much in GMRES work; it may pay on finer meshes."""
     store_states: bool = False
     """Keep every point's nodal displacements in the result (n_points x 3n floats)."""
@@ -339,7 +339,7 @@ def forward(problem, n_d: int | None = None, settings: ForwardSettings | None = 
     """Estimate the workspace by the forward method; see :class:`ForwardSettings`.
 
     With ``checkpoint_dir``, the run saves a checkpoint there every ``settings.checkpoint_every`` seconds
-    and when interrupted (Ctrl-C); ``resume=True`` continues from it (see :mod:`casadi_ws.checkpoint`).
+    and when interrupted (Ctrl-C); ``resume=True`` continues from it (see :mod:`casadi_ws.runtime.run_state`).
     """
     with one_blas_thread():
         return _forward(problem, n_d, settings, model, checkpoint_dir, resume)
@@ -461,12 +461,3 @@ def _parallel(problem, us, settings, workers, bar, saved_meta, saved, save):
     return tips, status, residual, states, counters
 
 
-def describe(problem, model) -> dict:
-    """Plain-data description of what was solved, for result files."""
-    return {
-        "name": problem.name, "source": problem.source, "n_nodes": problem.mesh.n_nodes,
-        "n_tets": problem.mesh.n_tets, "n_free_dofs": model.n_free, "material": asdict(problem.material),
-        "n_u": model.n_u, "cables": [c.name for c in problem.cables], "u_min": model.u_min.tolist(),
-        "u_max": model.u_max.tolist(), "end_effector": np.asarray(problem.end_effector).tolist(),
-        "tolerance": problem.solver.tolerance,
-    }

@@ -3,8 +3,8 @@
     R(q, u) = f_int(q) - H(q)^T u - F = 0,        H = -dL/dq,    p_E = C q + p_E(0)
 
 q is the vector of nodal displacements (3n, node-major; fixed dofs stay 0), u the cable tensions. The
-element laws come from :mod:`casadi_ws.material` (CasADi SX, one graph per element) and are evaluated over
-the mesh by :class:`casadi_ws.jit.ElementBatch`; assembly uses index maps fixed once per mesh. All matrices
+element laws come from :mod:`casadi_ws.fem.materials` (CasADi SX, one graph per element) and are evaluated over
+the mesh by :class:`casadi_ws.fem.kernels.ElementBatch`; assembly uses index maps fixed once per mesh. All matrices
 returned here are restricted to the free dofs.
 """
 
@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .actuators import cable_length_function
-from .jit import ElementBatch
-from .material import element_functions, rest_geometry
+from ..actuation.cable import cable_length_function
+from .kernels import ElementBatch
+from .materials import element_functions, rest_geometry
 from .mesh import embed
 
 __all__ = ["StaticModel"]
@@ -31,7 +31,7 @@ class _CableData:
 
 
 class StaticModel:
-    """Numeric static model of a :class:`casadi_ws.problem.Problem`."""
+    """Numeric static model of a :class:`casadi_ws.io.problem.Problem`."""
 
     def __init__(self, problem, backend: str = "auto"):
         self.problem = problem

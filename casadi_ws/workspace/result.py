@@ -17,12 +17,12 @@ Files written by :meth:`WorkspaceResult.save` into a directory:
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["FAILURE_WARNING", "WorkspaceResult", "load_result"]
+__all__ = ["FAILURE_WARNING", "WorkspaceResult", "describe", "load_result"]
 
 FAILURE_WARNING = 0.05
 """Share of failed solves above which the summary carries a warning."""
@@ -39,7 +39,7 @@ class WorkspaceResult:
     failed_u: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     """Inputs (or targets, for forward-backward) whose solve failed (f, n_u or 3)."""
     failed_status: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
-    """Status code of each failure (see :mod:`casadi_ws.equilibrium`)."""
+    """Status code of each failure (see :mod:`casadi_ws.solvers.equilibrium`)."""
     failed_residual: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """Relative residual reached by each failure."""
     states: np.ndarray | None = None
@@ -160,3 +160,14 @@ def load_result(directory: str | Path) -> WorkspaceResult:
         counters=summary["counters"], timings=summary["timings"], settings=summary["settings"],
         problem=summary["problem"], rest_tip=a["rest_tip"],
         arrays={k[len("extra_"):]: v for k, v in a.items() if k.startswith("extra_")})
+
+
+def describe(problem, model) -> dict:
+    """Plain-data description of what was solved, for result files."""
+    return {
+        "name": problem.name, "source": problem.source, "n_nodes": problem.mesh.n_nodes,
+        "n_tets": problem.mesh.n_tets, "n_free_dofs": model.n_free, "material": asdict(problem.material),
+        "n_u": model.n_u, "cables": [c.name for c in problem.cables], "u_min": model.u_min.tolist(),
+        "u_max": model.u_max.tolist(), "end_effector": np.asarray(problem.end_effector).tolist(),
+        "tolerance": problem.solver.tolerance,
+    }

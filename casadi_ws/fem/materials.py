@@ -9,7 +9,7 @@ node (12), ``G_e`` the rest gradients of the 4 shape functions (4x3, row-major, 
 ``p_e = [V0, mu, lambda]``. Displacements and element-local coordinates, not absolute positions: x - X
 would lose ~1e-16 |X| to round-off, which under small loads is larger than the residual tolerance. Rest
 quantities are inputs, not constants, so one small SX graph serves every element: it is then mapped over
-the mesh and assembled with constant index maps (see :mod:`casadi_ws.model`). Building the stiffness by AD
+the mesh and assembled with constant index maps (see :mod:`casadi_ws.fem.model`). Building the stiffness by AD
 through an MX map of the whole mesh is ~100x slower; differentiating this 12-input SX graph is cheap.
 
 Laws

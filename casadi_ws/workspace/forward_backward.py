@@ -18,7 +18,7 @@ whose tip lies within the target's cell, i.e. at most s/2 from the target in eac
 strategy uses eta/2). A target that is not reached from its first parent is recorded as explored and not
 reached; per (10) it is not tried again. Failure codes in ``failed_status``: -1 not reached (the closest
 point found lies outside the cell), -2 prefiltered (see ``FBSettings.prefilter``), >= 1 the backward
-solve failed (see :mod:`casadi_ws.backward`).
+solve failed (see :mod:`casadi_ws.workspace.backward`).
 """
 
 from __future__ import annotations
@@ -30,13 +30,13 @@ from pathlib import Path
 import numpy as np
 
 from .backward import BackwardSettings, backward
-from .checkpoint import CHECKPOINT, fingerprint, load_checkpoint, save_checkpoint
-from .equilibrium import CONVERGED, Factorization, factorize, solve_equilibrium
-from .forward import describe
-from .interval import Grid, bounded_step, interval_box, neighbourhood, sensitivity
-from .model import StaticModel
-from .parallel import deferred_interrupt, one_blas_thread, process_pool
-from .result import WorkspaceResult
+from ..runtime.run_state import CHECKPOINT, fingerprint, load_checkpoint, save_checkpoint
+from ..solvers.equilibrium import CONVERGED, Factorization, factorize, solve_equilibrium
+from ..solvers.sensitivity import bounded_step, sensitivity
+from .interval import Grid, interval_box, neighbourhood
+from ..fem.model import StaticModel
+from ..runtime.executor import deferred_interrupt, one_blas_thread, process_pool
+from .result import WorkspaceResult, describe
 
 __all__ = ["FBSettings", "forward_backward"]
 
@@ -300,7 +300,7 @@ def _forward_backward(problem, settings, model, step, checkpoint_dir=None, resum
         if pool is not None:
             pool.shutdown(cancel_futures=True)
     if settings.backward.formulation == "ipopt":
-        from .nlp import release_solvers
+        from ..nlp.formulations import release_solvers
 
         release_solvers()
     counters["stopped_at_max_cells"] = bool(frontier)

@@ -9,7 +9,7 @@ solved from a nearby equilibrium (the neighbour the target came from). Formulati
              du to the tip; a bounded linear least-squares problem gives du; the equilibrium at u + du is
              corrected by Newton from the predictor q + K^-1 H^T du. Repeated until the step is small. Each
              iterate is a verified equilibrium, so the answer always is one.
-``ipopt``    the full-space NLP over (q, u) (see :mod:`casadi_ws.nlp`), with exact derivatives from the
+``ipopt``    the full-space NLP over (q, u) (see :mod:`casadi_ws.nlp.formulations`), with exact derivatives from the
              element functions and a primal-dual warm start; the answer is then re-verified.
 
 Status codes (``BackwardResult.status``): 0 solved (a verified equilibrium, closest point found),
@@ -23,8 +23,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from .equilibrium import CONVERGED, Factorization, factorize, solve_equilibrium
-from .interval import bounded_step, sensitivity
+
+from ..solvers.equilibrium import CONVERGED, Factorization, factorize, solve_equilibrium
+from ..solvers.sensitivity import bounded_step, sensitivity
 
 __all__ = ["BackwardResult", "BackwardSettings", "backward"]
 
@@ -75,14 +76,12 @@ def backward(model, target, q, u, fac: Factorization | None = None, scale: float
              settings: BackwardSettings | None = None, sens=None) -> BackwardResult:
     """Solve (8) for ``target`` from the equilibrium (q, u); ``scale`` is a length (the grid step).
 
-    ``sens`` = (A, S) at (q, u), if known (see :func:`casadi_ws.interval.sensitivity`), spares an LU.
+    ``sens`` = (A, S) at (q, u), if known (see :func:`casadi_ws.solvers.sensitivity.sensitivity`), spares an LU.
     """
     settings = settings or BackwardSettings()
     if settings.formulation == "reduced":
         return _reduced(model, np.asarray(target, float), q, np.asarray(u, float), fac, scale, settings, sens)
     if settings.formulation == "ipopt":
-        from .nlp import backward_ipopt
-
         return backward_ipopt(model, np.asarray(target, float), q, np.asarray(u, float), settings)
     raise ValueError(f"unknown backward formulation {settings.formulation!r}; expected 'reduced' or 'ipopt'")
 
@@ -124,3 +123,20 @@ def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardRe
         if settings.stop_inside is not None and np.all(np.abs(tip - target) <= settings.stop_inside * scale):
             return BackwardResult(q, u, tip, SOLVED, it, n_eq, n_fac, fac)
     return BackwardResult(q, u, tip, ITERATION_LIMIT, settings.max_iterations, n_eq, n_fac, fac)
+
+
+def backward_ipopt(model, target, q, u, settings):
+    """Backward problem (8) by the full-space NLP; the answer is re-verified by a Newton solve."""
+    from ..nlp.formulations import _SOLVERS, TrackingNLP
+
+    nlp = _SOLVERS.get(id(model))
+    if nlp is None or nlp.model is not model:
+        nlp = _SOLVERS[id(model)] = TrackingNLP(model)
+    q_new, u_new, stats = nlp.solve(np.asarray(target)[None], q, u)
+    # verify: the same equilibrium test as everywhere else, from IPOPT's answer
+    eq = solve_equilibrium(model, u_new, q0=q, u0=u, guess=q_new)
+    if eq.status != CONVERGED:
+        return BackwardResult(q, u, model.tip(q), FAILED, stats.get("iter_count", 0), 1, eq.factorizations)
+    status = SOLVED if stats.get("success") else ITERATION_LIMIT
+    return BackwardResult(eq.q, u_new, eq.tip, status, stats.get("iter_count", 0), 1, eq.factorizations,
+                          eq.factorization)

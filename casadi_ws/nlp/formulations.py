@@ -15,7 +15,7 @@ model, which assembles them from the compiled per-element functions:
 
 The same pieces (:class:`FullSpaceNLP`) serve every formulation. :class:`TrackingNLP` is the one in use:
 the backward problem (8) of the forward-backward method is its one-point case, and inverse control
-(:mod:`casadi_ws.inverse`) adds points, a regularisation and limits on the change of u. Adding an objective
+(:mod:`casadi_ws.control.inverse`) adds points, a regularisation and limits on the change of u. Adding an objective
 term means adding its value and gradient in ``grad_f`` and its Hessian in ``hess_lag``; adding a constraint
 means appending rows to ``g`` and ``jac_g`` and its multiplier's Hessian to ``hess_lag`` (see
 docs/nlp-library.md).
@@ -33,11 +33,10 @@ import scipy.sparse as sp
 
 import casadi as ca
 
-from .actuators import cable_third_derivative_function
-from .equilibrium import CONVERGED, solve_equilibrium
-from .jit import ElementBatch
+from ..actuation.cable import cable_third_derivative_function
+from ..fem.kernels import ElementBatch
 
-__all__ = ["FullSpaceNLP", "TrackingNLP", "backward_ipopt", "quiet_stdout", "release_solvers"]
+__all__ = ["FullSpaceNLP", "TrackingNLP", "quiet_stdout", "release_solvers"]
 
 IPOPT_OPTIONS = {
     # measured on the backward problem: gradient scaling quadruples the iterations from a warm start
@@ -177,7 +176,7 @@ class TrackingNLP:
     """
 
     def __init__(self, model, points=None, weights=None, rho: float = 0.0):
-        from .mesh import embed
+        from ..fem.mesh import embed
 
         self.model = model
         self.pieces = pieces = FullSpaceNLP(model)
@@ -316,18 +315,3 @@ def release_solvers() -> None:
         gc.collect()
 
 
-def backward_ipopt(model, target, q, u, settings):
-    """Backward problem (8) by the full-space NLP; the answer is re-verified by a Newton solve."""
-    from .backward import FAILED, ITERATION_LIMIT, SOLVED, BackwardResult
-
-    nlp = _SOLVERS.get(id(model))
-    if nlp is None or nlp.model is not model:
-        nlp = _SOLVERS[id(model)] = TrackingNLP(model)
-    q_new, u_new, stats = nlp.solve(np.asarray(target)[None], q, u)
-    # verify: the same equilibrium test as everywhere else, from IPOPT's answer
-    eq = solve_equilibrium(model, u_new, q0=q, u0=u, guess=q_new)
-    if eq.status != CONVERGED:
-        return BackwardResult(q, u, model.tip(q), FAILED, stats.get("iter_count", 0), 1, eq.factorizations)
-    status = SOLVED if stats.get("success") else ITERATION_LIMIT
-    return BackwardResult(eq.q, u_new, eq.tip, status, stats.get("iter_count", 0), 1, eq.factorizations,
-                          eq.factorization)

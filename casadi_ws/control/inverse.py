@@ -1,7 +1,7 @@
 """Inverse control with the workspace method's NLP: reach a target, follow a path of targets.
 
 ``reach`` solves  min |p_E(q) - target|^2 (+ rho |u - u_ref|^2)  s.t.  R(q, u) = 0, u in U  with IPOPT and
-exact derivatives (:class:`casadi_ws.nlp.TrackingNLP`), from rest or from a warm start. If the direct solve
+exact derivatives (:class:`casadi_ws.nlp.formulations.TrackingNLP`), from rest or from a warm start. If the direct solve
 fails, it follows a homotopy: the target moves from the current tip to the goal in steps, each solve
 warm-started by the previous one. The answer is always re-verified by a Newton solve at the returned u.
 
@@ -19,9 +19,9 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from .equilibrium import CONVERGED, STATUS_NAMES, solve_equilibrium
-from .model import StaticModel
-from .nlp import TrackingNLP
+from ..solvers.equilibrium import CONVERGED, STATUS_NAMES, solve_equilibrium
+from ..fem.model import StaticModel
+from ..nlp.formulations import TrackingNLP
 
 __all__ = ["FollowResult", "ReachResult", "ReachSettings", "follow", "reach"]
 
