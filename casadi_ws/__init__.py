@@ -1,28 +1,56 @@
 """casadi-ws: where can the tip of a soft robot go? Static FEM in CasADi, forward and forward-backward
-workspace estimation, reusable inverse-control NLPs."""
+workspace estimation, reusable inverse-control NLPs.
 
-from .actuation.cable import Cable, trunk_cable
-from .solvers.equilibrium import Equilibrium, solve_equilibrium
-from .fem.materials import Material
-from .fem.mesh import Mesh, MeshError, box_mesh, load_mesh, trunk_mesh
-from .fem.model import StaticModel
-from .io.problem import Problem, ProblemError, SolverSettings, default_problem, load_problem, problem_from_dict
+The package is layered; each sub-package imports only those listed before it:
+``status`` < ``actuation`` < ``fem`` < ``solvers`` < ``nlp`` < ``runtime`` < ``workspace`` < ``control``
+< ``io`` < ``cli``. The names below are the public API.
+"""
+
+from .actuation import Actuator, Cable, trunk_cable
+from .control import FollowResult, ReachResult, ReachSettings, follow, reach
+from .fem import TET4, ElementType, Material, Mesh, MeshError, StaticModel, box_mesh, load_mesh, trunk_mesh
+from .io import Problem, ProblemError, SolverSettings, default_problem, load_problem, problem_from_dict
+from .runtime import Executor, ProcessExecutor, SerialExecutor
+from .solvers import Equilibrium, solve_equilibrium
+from .status import Status
+from .workspace import (BackwardSettings, FBSettings, ForwardSettings, WorkspaceResult, compare, forward,
+                        forward_backward, load_result)
 
 __all__ = [
+    "Actuator",
+    "BackwardSettings",
     "Cable",
+    "ElementType",
     "Equilibrium",
+    "Executor",
+    "FBSettings",
+    "FollowResult",
+    "ForwardSettings",
     "Material",
     "Mesh",
     "MeshError",
     "Problem",
     "ProblemError",
+    "ProcessExecutor",
+    "ReachResult",
+    "ReachSettings",
+    "SerialExecutor",
     "SolverSettings",
     "StaticModel",
+    "Status",
+    "TET4",
+    "WorkspaceResult",
     "box_mesh",
+    "compare",
     "default_problem",
+    "follow",
+    "forward",
+    "forward_backward",
     "load_mesh",
     "load_problem",
+    "load_result",
     "problem_from_dict",
+    "reach",
     "solve_equilibrium",
     "trunk_cable",
     "trunk_mesh",

@@ -27,7 +27,7 @@ import numpy as np
 
 import casadi_ws as cw
 from casadi_ws.workspace.compare import compare
-from casadi_ws.workspace.forward import ForwardSettings, _sweep, forward
+from casadi_ws.workspace.forward import ForwardSettings, forward, sweep
 from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
 from casadi_ws.runtime.executor import one_blas_thread
 from casadi_ws.io.plots import three_views
@@ -62,10 +62,10 @@ def sample_forward(problem, n_d, n_lines, seed=0):
     settings = ForwardSettings(n_d=n_d, progress=False)
     with one_blas_thread():
         t0 = time.perf_counter()
-        _sweep(model, lines[0], settings)
+        sweep(model, lines[0], settings)
         t_first = time.perf_counter() - t0
         t0 = time.perf_counter()
-        _, status, _, _, _ = _sweep(model, np.vstack(lines), settings)
+        _, status, _, _, _ = sweep(model, np.vstack(lines), settings)
         t_all = time.perf_counter() - t0
     points = n_lines * n_d
     return (t_all - t_first) / points, points, int(np.sum(status[n_d:] != 0))

@@ -133,7 +133,7 @@ def test_cli_solve_writes_files_and_refuses_to_overwrite(tmp_path):
 
 
 def test_checkpoints_survive_failed_points_and_resume_to_the_same_sweep():
-    from casadi_ws.workspace.forward import _sweep
+    from casadi_ws.workspace.forward import sweep
 
     pb = small_trunk("corotational", n_cables=2)
     pb.solver.max_load_steps = 2
@@ -141,11 +141,11 @@ def test_checkpoints_survive_failed_points_and_resume_to_the_same_sweep():
     s = ForwardSettings(n_d=4, progress=False, max_iter=1, predictor="none", checkpoint_every=0.0)
     us = input_grid(pb.u_min, pb.u_max, 4)
     saved = []
-    ref = _sweep(m, us, s, checkpoint=lambda st: saved.append(st))  # a checkpoint after every grid line
+    ref = sweep(m, us, s, checkpoint=lambda st: saved.append(st))  # a checkpoint after every grid line
     assert (ref[1] != 0).any() and len(saved) == len(us) // 4
     assert any(len(st["hist_u"]) == 0 for st in saved)  # states right after a failure are saved too
     mid = saved[len(saved) // 2 - 1]
-    again = _sweep(m, us, s, resume=dict(mid))
+    again = sweep(m, us, s, resume=dict(mid))
     np.testing.assert_array_equal(again[1], ref[1])
     assert np.nanmax(np.abs(again[0] - ref[0])) < 1e-8
 

@@ -1,9 +1,9 @@
 """Cable actuators: a polyline of passage points embedded in the mesh, pulled with tension u.
 
-The cable length is L(x) = sum of the segment lengths of the polyline (pull point, if any, then the passage
-points), each passage point moving with its host tetrahedron (barycentric embedding). The actuation force
-on the nodes is H(q)^T u with H = -dL/dq: a tension shortens the cable. This is SOFA's CableConstraint in
-force mode.
+The cable's quantity is its length L(x) = sum of the segment lengths of the polyline (pull point, if any,
+then the passage points), each passage point moving with its host element (embedded). A tension does work
+by shortening the cable, so its force on the nodes is H(q)^T u with H = -dL/dq (sign -1 in
+:class:`casadi_ws.actuation.base.Actuator`). This is SOFA's CableConstraint in force mode.
 """
 
 from __future__ import annotations
@@ -13,11 +13,13 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-__all__ = ["Cable", "cable_length_function", "cable_third_derivative_function", "trunk_cable"]
+from .base import Actuator
+
+__all__ = ["Cable", "trunk_cable"]
 
 
 @dataclass
-class Cable:
+class Cable(Actuator):
     points: np.ndarray
     """Passage points at rest, (k, 3), metres, in order from the pulled end."""
     pull_point: np.ndarray | None = None
@@ -28,40 +30,33 @@ class Cable:
     """Upper bound of the tension, N."""
     name: str = "cable"
 
+    kind = "cable"
+    input_unit = "N"
+    quantity_name = "length"
+    quantity_unit = "m"
+    sign = -1.0
+
+    def rest_points(self) -> np.ndarray:
+        return np.asarray(self.points, dtype=float)
+
     def polyline(self) -> np.ndarray:
-        pts = np.asarray(self.points, dtype=float)
+        pts = self.rest_points()
         if self.pull_point is None:
             return pts
         return np.vstack([np.asarray(self.pull_point, dtype=float)[None], pts])
 
+    def quantity(self, P: ca.SX) -> ca.SX:
+        pts = [P[3 * i:3 * i + 3] for i in range(P.numel() // 3)]
+        if self.pull_point is not None:
+            pts = [ca.DM(np.asarray(self.pull_point, dtype=float))] + pts
+        L = 0
+        for a, b in zip(pts[:-1], pts[1:]):
+            L += ca.norm_2(b - a)
+        return L
 
-def cable_length_function(n_points: int, has_pull_point: bool) -> ca.Function:
-    """SX function of the passage point positions P (3k, point-major) -> (L, dL/dP, d2L/dP2).
-
-    The pull point, when present, is a fixed parameter ``pull`` (3).
-    """
-    P = ca.SX.sym("P", 3 * n_points)
-    pull = ca.SX.sym("pull", 3)
-    pts = [P[3 * i:3 * i + 3] for i in range(n_points)]
-    if has_pull_point:
-        pts = [pull] + pts
-    L = 0
-    for a, b in zip(pts[:-1], pts[1:]):
-        L += ca.norm_2(b - a)
-    g = ca.gradient(L, P)
-    Hs = ca.hessian(L, P)[0]
-    return ca.Function("cable_length", [P, pull], [L, g, ca.densify(Hs)], ["P", "pull"], ["L", "dL", "d2L"])
-
-
-def cable_third_derivative_function(n_points: int, has_pull_point: bool) -> ca.Function:
-    """SX function (P, pull, mu) -> d2(mu . dL/dP)/dP2: the cable's share of a Lagrangian Hessian."""
-    f = cable_length_function(n_points, has_pull_point)
-    P = ca.SX.sym("P", 3 * n_points)
-    pull = ca.SX.sym("pull", 3)
-    mu = ca.SX.sym("mu", 3 * n_points)
-    g = f(P, pull)[1]
-    T = ca.hessian(ca.dot(mu, g), P)[0]
-    return ca.Function("cable_third", [P, pull, mu], [ca.densify(T)], ["P", "pull", "mu"], ["T"])
+    def describe(self) -> dict:
+        return {**super().describe(),
+                "pull_point": None if self.pull_point is None else np.asarray(self.pull_point, float).tolist()}
 
 
 def trunk_cable(angle_deg: float, kind: str = "long", radius: float = 0.010, taper: float = 8.0 / 195.0,

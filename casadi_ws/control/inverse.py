@@ -19,7 +19,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..solvers.equilibrium import CONVERGED, STATUS_NAMES, solve_equilibrium
+from ..solvers.equilibrium import CONVERGED, solve_equilibrium
+from ..status import Status
 from ..fem.model import StaticModel
 from ..nlp.formulations import TrackingNLP
 
@@ -49,21 +50,24 @@ class ReachResult:
     tip: np.ndarray
     error: float
     """Distance from the verified tip to the target, metres."""
-    status: str
-    """``converged`` (IPOPT solved, equilibrium verified), ``ipopt_not_solved`` (best iterate, verified)
-    or the equilibrium status when even the verification failed."""
+    status: int
+    """A :class:`casadi_ws.status.Status` code: 0 converged (IPOPT solved, equilibrium verified),
+    5 iteration limit (IPOPT stopped before optimality; its last iterate, verified, is returned) or
+    6 solve failed (not even that iterate is an equilibrium: the start is returned)."""
     iterations: int
     q: np.ndarray
     homotopy: bool = False
 
     def to_dict(self) -> dict:
         return {"reachable": self.reachable, "u": self.u.tolist(), "tip": self.tip.tolist(),
-                "error": self.error, "status": self.status, "iterations": self.iterations,
+                "error": self.error, "status": Status(self.status).label, "status_code": int(self.status),
+                "iterations": self.iterations,
                 "homotopy": self.homotopy, "units": {"tip": "m", "u": "N", "error": "m"}}
 
 
 def _solver(model, settings: ReachSettings) -> TrackingNLP:
-    key = (len(settings.extra_points), settings.regularization)
+    # the points themselves are part of the key: two sets of the same size are different problems
+    key = (np.asarray(settings.extra_points, dtype=float).tobytes(), settings.regularization)
     cache = model.__dict__.setdefault("_tracking_nlps", {})
     if key not in cache:
         points = None
@@ -106,11 +110,11 @@ def reach(problem_or_model, target, q0=None, u0=None, settings: ReachSettings | 
             ok = bool(stats.get("success"))
     eq = solve_equilibrium(model, u, q0=q0, u0=u0, guess=q)
     if eq.status != CONVERGED:
-        return ReachResult(False, u, model.tip(q0), float(np.linalg.norm(model.tip(q0) - target)),
-                           STATUS_NAMES[eq.status], its, q0, used_homotopy)
+        return ReachResult(False, u0, model.tip(q0), float(np.linalg.norm(model.tip(q0) - target)),
+                           Status.SOLVE_FAILED, its, q0, used_homotopy)
     err = float(np.linalg.norm(eq.tip - target))
-    return ReachResult(err <= settings.tolerance, eq.u, eq.tip, err, "converged" if ok else "ipopt_not_solved",
-                       its, eq.q, used_homotopy)
+    return ReachResult(err <= settings.tolerance, eq.u, eq.tip, err,
+                       Status.CONVERGED if ok else Status.ITERATION_LIMIT, its, eq.q, used_homotopy)
 
 
 @dataclass

@@ -1,22 +1,26 @@
-"""Constitutive laws of a linear tetrahedron, written once per element in CasADi SX.
+"""Constitutive laws, written once per element in CasADi SX on an element type's quadrature.
 
 Each law is a function of one element only:
 
     f_e = element_force(u_e, X_e, G_e, p_e)
 
-with ``u_e`` the displacements of the 4 nodes (12), ``X_e`` their rest positions relative to the first
-node (12), ``G_e`` the rest gradients of the 4 shape functions (4x3, row-major, 12) and
-``p_e = [V0, mu, lambda]``. Displacements and element-local coordinates, not absolute positions: x - X
-would lose ~1e-16 |X| to round-off, which under small loads is larger than the residual tolerance. Rest
-quantities are inputs, not constants, so one small SX graph serves every element: it is then mapped over
-the mesh and assembled with constant index maps (see :mod:`casadi_ws.fem.model`). Building the stiffness by AD
-through an MX map of the whole mesh is ~100x slower; differentiating this 12-input SX graph is cheap.
+with ``u_e`` the displacements of the element's nodes (n_dof = 3 n_nodes), ``X_e`` their rest positions
+relative to the first node (n_dof), ``G_e`` the rest gradients of the shape functions at each quadrature
+point (n_qp x n_nodes x 3, row-major) and ``p_e = [w_1 .. w_nqp, mu, lambda]`` with w_k the quadrature
+weights in m^3 (for the linear tetrahedron: its volume). The sizes come from the
+:class:`casadi_ws.fem.elements.ElementType`. Displacements and element-local coordinates, not absolute
+positions: x - X would lose ~1e-16 |X| to round-off, which under small loads is larger than the residual
+tolerance. Rest quantities are inputs, not constants, so one small SX graph serves every element: it is
+then evaluated over the mesh and assembled with constant index maps (see :mod:`casadi_ws.fem.model`).
+Building the stiffness by AD through an MX map of the whole mesh is ~100x slower; differentiating this
+small SX graph is cheap.
 
 Laws
 ----
 ``linear``        small-strain Hooke, f = Ke (x - X).
-``corotational``  SOFA TetrahedronFEMForceField "large": the element frame is built from edges ab and ac by
-                  Gram-Schmidt, and f = R^T Ke_loc (R x - R0 X), i.e. Ke applied in the rotated frame.
+``corotational``  SOFA TetrahedronFEMForceField "large": the element frame is built from the corner edges
+                  ab and ac by Gram-Schmidt, and f = R^T Ke_loc (R x - R0 X), i.e. Ke applied in the
+                  rotated frame.
 ``neohookean``    compressible, W = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2.
 """
 
@@ -26,6 +30,8 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
+
+from .elements import TET4, ElementType
 
 __all__ = ["MATERIAL_MODELS", "Material", "element_functions", "lame"]
 
@@ -77,59 +83,62 @@ def _frame(x):
     return ca.vertcat(ex, ey, ez)
 
 
-def _element_force(model: str, u, X, G, V0, mu, lam):
+def _element_force(model: str, u, X, Gs, ws, mu, lam):
+    """Nodal forces (n_nodes x 3) summed over the quadrature points (gradients ``Gs``, weights ``ws``)."""
     if model == "linear":
-        return _linear_force(u, G, V0, mu, lam)
+        return sum(_linear_force(u, G, w, mu, lam) for G, w in zip(Gs, ws))
     if model == "corotational":
         Q = ca.mtimes(_frame(X + u).T, _frame(X))  # rotation rest -> current
         d = ca.mtimes(X, Q - ca.SX.eye(3)) + ca.mtimes(u, Q)  # rows: Q^T x_a - X_a
-        return ca.mtimes(_linear_force(d, G, V0, mu, lam), Q.T)  # rows: Q f_a
+        return ca.mtimes(sum(_linear_force(d, G, w, mu, lam) for G, w in zip(Gs, ws)), Q.T)  # rows: Q f_a
     if model == "neohookean":
-        F = ca.SX.eye(3) + ca.mtimes(u.T, G)
-        J = ca.det(F)
-        Finv_T = ca.inv(F).T
-        P = mu * (F - Finv_T) + lam * ca.log(J) * Finv_T
-        return V0 * ca.mtimes(G, P.T)
+        return sum(_neohookean_force(u, G, w, mu, lam) for G, w in zip(Gs, ws))
     raise ValueError(f"unknown material model {model!r}; expected one of {MATERIAL_MODELS}")
 
 
-def element_functions(model: str) -> dict[str, ca.Function]:
-    """SX functions of one element for ``model``.
+def _neohookean_force(u, G, V0, mu, lam):
+    F = ca.SX.eye(3) + ca.mtimes(u.T, G)
+    J = ca.det(F)
+    Finv_T = ca.inv(F).T
+    P = mu * (F - Finv_T) + lam * ca.log(J) * Finv_T
+    return V0 * ca.mtimes(G, P.T)
 
-    Returns ``force`` (f_e, 12), ``stiffness`` (vec of df_e/dx_e, 144, column-major) and
-    ``hessian_vector`` (vec of d(K_e^T lam_e)/du_e, 144: the element's share of the Hessian of lam^T f_int,
-    needed by the full-space NLP). Inputs: u_e (12), X_e (12, relative to node 0), G_e (12),
-    p_e = [V0, mu, lambda] (3).
-    Node-major layout: entry 3*a + i is coordinate i of node a.
+
+def element_functions(model: str, element: ElementType = TET4) -> dict[str, ca.Function]:
+    """SX functions of one element of type ``element`` for the material ``model``.
+
+    Returns ``force`` (f_e, n_dof), ``stiffness`` (vec of df_e/dx_e, n_dof^2, column-major) and
+    ``hessian_vector`` (vec of d(K_e^T lam_e)/du_e, n_dof^2: the element's share of the Hessian of
+    lam^T f_int, needed by the full-space NLP). Inputs: u_e (n_dof), X_e (n_dof, relative to node 0),
+    G_e (n_qp * n_dof), p_e = [w_1 .. w_nqp, mu, lambda]. Node-major layout: entry 3*a + i is coordinate
+    i of node a.
     """
-    xv = ca.SX.sym("u", 12)
-    Xv = ca.SX.sym("X", 12)
-    Gv = ca.SX.sym("G", 12)
-    p = ca.SX.sym("p", 3)
-    lam_e = ca.SX.sym("lam", 12)
-    x = ca.reshape(xv, 3, 4).T
-    X = ca.reshape(Xv, 3, 4).T
-    G = ca.reshape(Gv, 3, 4).T
-    f = ca.densify(ca.reshape(_element_force(model, x, X, G, p[0], p[1], p[2]).T, 12, 1))
+    nd, nn, nq = element.n_dof, element.n_nodes, element.n_qp
+    xv = ca.SX.sym("u", nd)
+    Xv = ca.SX.sym("X", nd)
+    Gv = ca.SX.sym("G", nq * nd)
+    p = ca.SX.sym("p", nq + 2)
+    lam_e = ca.SX.sym("lam", nd)
+    x = ca.reshape(xv, 3, nn).T
+    X = ca.reshape(Xv, 3, nn).T
+    Gs = [ca.reshape(Gv[k * nd:(k + 1) * nd], 3, nn).T for k in range(nq)]
+    ws = [p[k] for k in range(nq)]
+    f = ca.densify(ca.reshape(_element_force(model, x, X, Gs, ws, p[nq], p[nq + 1]).T, nd, 1))
     K = ca.jacobian(f, xv)
     Hv = ca.jacobian(ca.mtimes(K.T, lam_e), xv)
     ins = [xv, Xv, Gv, p]
     names = ["u", "X", "G", "p"]
+    tag = f"{element.name}_{model}" if element is not TET4 else model  # tet4 keeps its compiled kernels' names
     return {
-        "force": ca.Function(f"{model}_force", ins, [f], names, ["f"]),
-        "stiffness": ca.Function(f"{model}_stiffness", ins, [ca.densify(ca.reshape(K, 144, 1))], names, ["K"]),
+        "force": ca.Function(f"{tag}_force", ins, [f], names, ["f"]),
+        "stiffness": ca.Function(f"{tag}_stiffness", ins, [ca.densify(ca.reshape(K, nd * nd, 1))], names, ["K"]),
         "hessian_vector": ca.Function(
-            f"{model}_hessian_vector", ins + [lam_e], [ca.densify(ca.reshape(Hv, 144, 1))], names + ["lam"], ["H"]
-        ),
+            f"{tag}_hessian_vector", ins + [lam_e], [ca.densify(ca.reshape(Hv, nd * nd, 1))], names + ["lam"],
+            ["H"]),
     }
 
 
-def rest_geometry(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rest volumes (m,) and shape-function gradients (m, 4, 3) of tetrahedra ``X`` (m, 4, 3)."""
-    Dm = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2)  # columns = edges
-    V0 = np.linalg.det(Dm) / 6.0
-    Dinv = np.linalg.inv(Dm)  # rows: gradients of shape functions 1..3
-    G = np.empty((X.shape[0], 4, 3))
-    G[:, 1:] = Dinv
-    G[:, 0] = -Dinv.sum(axis=1)
-    return V0, G
+def rest_geometry(X: np.ndarray, element: ElementType = TET4) -> tuple[np.ndarray, np.ndarray]:
+    """Quadrature weights in m^3 (m, n_qp) and shape-function gradients (m, n_qp, n_nodes, 3) of the
+    elements ``X`` (m, n_nodes, 3); for the linear tetrahedron the weight is the volume."""
+    return element.rest_geometry(X)

@@ -1,6 +1,7 @@
 """Tetrahedral meshes: loading, generating, checking, and embedding points in them.
 
-A :class:`Mesh` holds rest node positions (n, 3) in metres and linear tetrahedra (m, 4), positively oriented.
+A :class:`Mesh` holds rest node positions (n, 3) in metres and tetrahedra (m, n_nodes of its element type),
+positively oriented.
 Files are read with meshio (legacy VTK, VTU, Gmsh, ...); only ``tetra`` cells are kept, the triangles, lines
 and vertices such files often carry are ignored, and nodes used by no tetrahedron are dropped.
 """
@@ -14,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
+
+from .elements import TET4, ElementType
 
 __all__ = [
     "Mesh",
@@ -35,11 +38,13 @@ class Mesh:
     nodes: np.ndarray
     """Rest positions of the nodes, (n, 3), metres."""
     tets: np.ndarray
-    """Node indices of the linear tetrahedra, (m, 4), positively oriented."""
+    """Node indices of the tetrahedra, (m, element.n_nodes), corners first, positively oriented."""
     source: str = "<generated>"
     """Where the mesh came from, for messages."""
     file_tet_index: np.ndarray | None = field(default=None, repr=False)
     """Index of each tetrahedron among the file's tetra cells (for error messages)."""
+    element: ElementType = TET4
+    """The element type of the cells."""
 
     @property
     def n_nodes(self) -> int:
@@ -50,12 +55,13 @@ class Mesh:
         return self.tets.shape[0]
 
     def volumes(self) -> np.ndarray:
-        X = self.nodes[self.tets]
+        """Volumes of the tetrahedra spanned by the corners (m,)."""
+        X = self.nodes[self.tets[:, :4]]
         return np.einsum("ij,ij->i", np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), X[:, 3] - X[:, 0]) / 6
 
     def check(self) -> None:
         """Reject degenerate and inverted tetrahedra, naming the first offending element."""
-        X = self.nodes[self.tets]
+        X = self.nodes[self.tets[:, :4]]
         V = self.volumes()
         edges = [X[:, i] - X[:, j] for i, j in ((1, 0), (2, 0), (3, 0), (2, 1), (3, 1), (3, 2))]
         h = np.mean([np.linalg.norm(e, axis=1) for e in edges], axis=0)
@@ -177,12 +183,13 @@ def trunk_mesh(length: float = 0.195, radius_base: float = 0.013, radius_tip: fl
 
 @dataclass
 class Embedding:
-    """Points attached to the mesh by barycentric coordinates."""
+    """Points attached to the mesh by the shape functions of their host elements."""
 
     tet: np.ndarray
     """Index of the host tetrahedron of each point, (k,)."""
     weights: np.ndarray
-    """Barycentric coordinates in the host, (k, 4); negative entries mean extrapolation."""
+    """Shape function values at the point in its host, (k, n_nodes); for the linear tetrahedron the
+    barycentric coordinates. Negative barycentric coordinates mean extrapolation."""
     outside: np.ndarray
     """Distance from each point to its host tetrahedron, (k,) metres (0 inside the mesh)."""
 
@@ -190,7 +197,7 @@ class Embedding:
         """W (3k x 3n) with positions of the points = W @ nodal positions (node-major)."""
         k = self.tet.shape[0]
         rows, cols, vals = [], [], []
-        for a in range(4):
+        for a in range(self.weights.shape[1]):
             nodes = mesh.tets[self.tet, a]
             for i in range(3):
                 rows.append(3 * np.arange(k) + i)
@@ -216,14 +223,16 @@ def embed(mesh: Mesh, points: np.ndarray) -> Embedding:
 
     The host of an outside point is the tetrahedron closest to it; its barycentric coordinates are then
     extrapolated (as SOFA's BarycentricMapping does), and ``outside`` says how far it lies from the mesh.
+    The weights are the host element type's shape functions at the point.
     """
     points = np.atleast_2d(np.asarray(points, dtype=float))
-    X = mesh.nodes[mesh.tets]
+    element = mesh.element
+    X = mesh.nodes[mesh.tets[:, :4]]
     T = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2)
     Tinv = np.linalg.inv(T)
     centroids = X.mean(axis=1)
     tet = np.empty(len(points), dtype=np.int64)
-    weights = np.empty((len(points), 4))
+    weights = np.empty((len(points), element.n_nodes))
     outside = np.zeros(len(points))
     for k, p in enumerate(points):
         lam = np.einsum("mij,mj->mi", Tinv, p - X[:, 0])
@@ -237,5 +246,5 @@ def embed(mesh: Mesh, points: np.ndarray) -> Embedding:
             e = int(cand[np.argmin(dist)])
             outside[k] = float(dist.min())
         tet[k] = e
-        weights[k] = np.concatenate([[1.0 - (Tinv[e] @ (p - X[e, 0])).sum()], Tinv[e] @ (p - X[e, 0])])
+        weights[k] = element.shape((Tinv[e] @ (p - X[e, 0]))[None])[0]
     return Embedding(tet, weights, outside)

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from ..actuation.base import Actuator
 from ..actuation.cable import Cable, trunk_cable
 from ..fem.materials import MATERIAL_MODELS, Material
 from ..fem.mesh import Mesh, MeshError, box_mesh, embed, load_mesh, trunk_mesh
@@ -61,8 +62,8 @@ class Problem:
     material: Material
     fixed_nodes: np.ndarray
     """Indices of the nodes held fixed (zero displacement)."""
-    cables: list[Cable]
-    """Actuators; the input vector u holds their tensions in this order."""
+    actuators: list[Actuator]
+    """The actuators (cables); the input vector u holds their inputs in this order."""
     end_effector: np.ndarray
     """Rest position of the point of interest (3,), embedded in the mesh."""
     gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -76,16 +77,21 @@ class Problem:
     source: str = "<python>"
 
     @property
+    def cables(self) -> list[Cable]:
+        """The actuators that are cables, in input order."""
+        return [a for a in self.actuators if isinstance(a, Cable)]
+
+    @property
     def n_u(self) -> int:
-        return len(self.cables)
+        return len(self.actuators)
 
     @property
     def u_min(self) -> np.ndarray:
-        return np.array([c.u_min for c in self.cables], dtype=float)
+        return np.array([a.u_min for a in self.actuators], dtype=float)
 
     @property
     def u_max(self) -> np.ndarray:
-        return np.array([c.u_max for c in self.cables], dtype=float)
+        return np.array([a.u_max for a in self.actuators], dtype=float)
 
 
 def nodes_in_box(mesh: Mesh, lower, upper) -> np.ndarray:

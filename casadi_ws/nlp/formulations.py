@@ -8,10 +8,12 @@ CasADi's ``nlpsol`` would build the gradient, constraint Jacobian and Lagrangian
 whole mesh (about 1 s per Hessian on the trunk). Instead they are supplied as CasADi Callbacks that call the
 model, which assembles them from the compiled per-element functions:
 
-    dR/dq      = K (element stiffness + sum_c u_c d2L_c)           the Newton tangent
-    dR/du_c    = dL_c/dq
-    d2(lam.R)  = sum_e d(K_e^T lam_e)/dq_e  +  sum_c u_c d2(lam . dL_c)/dq2      (q, q)
-                 d2L_c lam                                                   (q, u_c)
+    dR/dq      = K (element stiffness - sum_a sign_a u_a d2Q_a)     the Newton tangent
+    dR/du_a    = -sign_a dQ_a/dq                                  (a cable: sign -1, Q = its length)
+    d2(lam.R)  = sum_e d(K_e^T lam_e)/dq_e  -  sum_a sign_a u_a d2(lam . dQ_a)/dq2      (q, q)
+                 -sign_a d2Q_a lam                                                (q, u_a)
+
+the actuators' terms derived by CasADi from each actuator's quantity (:mod:`casadi_ws.actuation`).
 
 The same pieces (:class:`FullSpaceNLP`) serve every formulation. :class:`TrackingNLP` is the one in use:
 the backward problem (8) of the forward-backward method is its one-point case, and inverse control
@@ -33,7 +35,6 @@ import scipy.sparse as sp
 
 import casadi as ca
 
-from ..actuation.cable import cable_third_derivative_function
 from ..fem.kernels import ElementBatch
 
 __all__ = ["FullSpaceNLP", "TrackingNLP", "quiet_stdout", "release_solvers"]
@@ -88,7 +89,6 @@ class FullSpaceNLP:
         self.nq, self.nu = m.n_free, m.n_u
         self.nx = self.nq + self.nu
         self._hv = ElementBatch(m.element_functions["hessian_vector"], m.backend)
-        self._third = [cable_third_derivative_function(c.W.shape[0] // 3, True) for c in m.cables]
         rng = np.random.default_rng(0)
         q = m.full(rng.normal(size=self.nq) * 1e-6)
         u = np.ones(self.nu)
@@ -119,16 +119,8 @@ class FullSpaceNLP:
         he, = self._hv(ue, Xe, Ge, Pe, lam[m._edofs])
         Hqq = m.assemble(he)
         Hqq = 0.5 * (Hqq + Hqq.T)
-        x = m.X + q
-        cols = []
-        for c, third, uc in zip(m.cables, self._third, u):
-            P = c.W @ x
-            mu = c.W @ lam
-            Wf = c.W[:, m.free]
-            T = np.asarray(third(P, c.pull, mu))
-            Hqq = Hqq + uc * (Wf.T @ sp.csr_matrix(T) @ Wf)
-            _, _, d2L = c.fun(P, c.pull)
-            cols.append(Wf.T @ (np.asarray(d2L) @ mu))
+        Hact, cols = m.actuator_third(q, lam, u)
+        Hqq = Hqq + Hact
         if objective_hessian is not None:
             Hqq = Hqq + lam_f * objective_hessian
         Hqu = sp.csc_matrix(np.column_stack(cols)) if cols else sp.csc_matrix((self.nq, 0))

@@ -1,10 +1,19 @@
-"""Processes and threads for the hot loops.
+"""Executors: where the methods' independent pieces of work run (this process, or worker processes).
+
+A method hands an executor a function, the problem and a list of jobs; the executor calls
+``fn(model, *job)`` for each job with a model of the problem and yields the results. Compiled CasADi
+objects do not travel between processes, so only the problem, the jobs and the results (plain data and
+numpy arrays) do: every worker process builds its model once per problem (:func:`model_for`, keyed by the
+problem's fingerprint) and keeps it for the next job. IPOPT is not thread-safe under CasADi, so parallel
+workers are processes with one thread each.
+
+``SerialExecutor``   in this process, with the caller's model (no copy)
+``ProcessExecutor``  a pool of N fresh ('spawn') processes with one BLAS thread each
 
 OpenBLAS's threads slow this workload down: SuperLU and the small dense least-squares problems call BLAS on
 blocks too small to share, and two processes each running two BLAS threads on two cores fight. Measured on
 the trunk: a backward solve takes 0.29 s with one BLAS thread against 0.40 s with the default, a forward
-point 33 ms against 36 ms. The methods therefore run with one BLAS thread and use processes (each with its
-own model; IPOPT is not thread-safe under CasADi's ``map``) for parallel work.
+point 33 ms against 36 ms. The methods therefore run with one BLAS thread (:func:`one_blas_thread`).
 """
 
 from __future__ import annotations
@@ -12,11 +21,16 @@ from __future__ import annotations
 import contextlib
 import multiprocessing as mp
 import os
+import pickle
 import signal
 import threading
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from typing import Callable, Iterator
 
-__all__ = ["deferred_interrupt", "one_blas_thread", "process_pool"]
+from .run_state import problem_fingerprint
+
+__all__ = ["Executor", "ProcessExecutor", "SerialExecutor", "deferred_interrupt", "make_executor", "model_for",
+           "one_blas_thread"]
 
 
 @contextlib.contextmanager
@@ -28,20 +42,106 @@ def one_blas_thread():
         yield
 
 
-def _init(initializer, initargs):
+_MODELS: dict[str, object] = {}
+
+
+def model_for(problem, key: str | None = None):
+    """This process's model of ``problem``, built on first use and kept (one per problem fingerprint).
+
+    ``problem`` may be given pickled (bytes), with its ``key``: it is then unpickled only if no model of
+    that key exists yet.
+    """
+    from ..fem.model import StaticModel
+
+    key = key or problem_fingerprint(problem)
+    if key not in _MODELS:
+        if isinstance(problem, bytes):
+            problem = pickle.loads(problem)
+        if len(_MODELS) >= 4:  # a design study sends many problems: keep the newest few
+            _MODELS.pop(next(iter(_MODELS)))
+        _MODELS[key] = StaticModel(problem)
+    return _MODELS[key]
+
+
+def _call(fn, key, blob, job):
+    return fn(model_for(blob, key), *job)
+
+
+class Executor:
+    """Interface: run ``fn(model, *job)`` for every job. Use as a context manager or call :meth:`close`."""
+
+    workers: int = 1
+
+    def map_unordered(self, fn: Callable, problem, jobs: list) -> Iterator[tuple[int, object]]:
+        """Yield ``(index, result)`` as jobs complete."""
+        raise NotImplementedError
+
+    def map(self, fn: Callable, problem, jobs: list) -> list:
+        """The results in job order."""
+        out = [None] * len(jobs)
+        for i, r in self.map_unordered(fn, problem, jobs):
+            out[i] = r
+        return out
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class SerialExecutor(Executor):
+    """Jobs run here, one after the other, on ``model`` (or on this process's model of the problem)."""
+
+    def __init__(self, model=None):
+        self.model = model
+
+    def map_unordered(self, fn, problem, jobs):
+        model = self.model if self.model is not None else model_for(problem)
+        for i, job in enumerate(jobs):
+            yield i, fn(model, *job)
+
+
+def _init_worker():
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(limits=1, user_api="blas")  # for the worker's lifetime
-    if initializer is not None:
-        initializer(*initargs)
 
 
-def process_pool(workers: int, initializer=None, initargs=()) -> ProcessPoolExecutor:
-    """A pool of fresh ('spawn') processes with one BLAS thread each."""
-    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ.setdefault(var, "1")  # inherited by the children before they import numpy
-    return ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=_init,
-                               initargs=(initializer, initargs))
+class ProcessExecutor(Executor):
+    """A pool of ``workers`` fresh processes, each with one BLAS thread and its own models."""
+
+    def __init__(self, workers: int):
+        self.workers = int(workers)
+        for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ.setdefault(var, "1")  # inherited by the children before they import numpy
+        self._pool = ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"), initializer=_init_worker)
+
+    def map_unordered(self, fn, problem, jobs):
+        # the problem travels pickled once per call; a worker unpickles it only to build its first model
+        blob = pickle.dumps(problem, protocol=4)
+        key = problem_fingerprint(problem)
+        futures = {self._pool.submit(_call, fn, key, blob, job): i for i, job in enumerate(jobs)}
+        pending = set(futures)
+        try:
+            while pending:
+                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for f in done:
+                    yield futures[f], f.result()
+        finally:
+            for f in pending:
+                f.cancel()
+
+    def close(self) -> None:
+        self._pool.shutdown(cancel_futures=True)
+
+
+def make_executor(workers: int, model=None) -> Executor:
+    """``SerialExecutor(model)`` for one worker, else a ``ProcessExecutor``."""
+    return SerialExecutor(model) if int(workers) <= 1 else ProcessExecutor(workers)
 
 
 class _Deferred:

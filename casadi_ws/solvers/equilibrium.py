@@ -6,17 +6,7 @@ long as the residual contracts fast; it is refreshed otherwise), which is what m
 nearby inputs cheap. When a direct solve fails, the load is applied in continuation steps from the last
 known equilibrium (or from rest).
 
-Status codes (``Equilibrium.status``):
-
-====  ======================  =================================================================
-code  name                    meaning
-====  ======================  =================================================================
-0     CONVERGED               relative residual below tolerance and u inside its bounds
-1     MAX_ITERATIONS          Newton did not reach the tolerance in the allowed iterations
-2     DIVERGED                NaN/inf (e.g. an inverted element) or the line search failed
-3     CONTINUATION_FAILED     load stepping could not reach the full load
-4     OUTSIDE_BOUNDS          converged, but u lies outside [u_min, u_max]: not a valid point
-====  ======================  =================================================================
+Status codes (``Equilibrium.status``): 0-4 of :mod:`casadi_ws.status` (0 converged: verified).
 """
 
 from __future__ import annotations
@@ -26,13 +16,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse.linalg as sla
 
-__all__ = ["CONVERGED", "CONTINUATION_FAILED", "DIVERGED", "Equilibrium", "Factorization", "MAX_ITERATIONS",
-           "OUTSIDE_BOUNDS", "STATUS_NAMES", "factorize", "inside_bounds", "newton_krylov", "solve_equilibrium",
-           "verify"]
+from ..status import Status
 
-CONVERGED, MAX_ITERATIONS, DIVERGED, CONTINUATION_FAILED, OUTSIDE_BOUNDS = range(5)
-STATUS_NAMES = {CONVERGED: "converged", MAX_ITERATIONS: "max_iterations", DIVERGED: "diverged",
-                CONTINUATION_FAILED: "continuation_failed", OUTSIDE_BOUNDS: "outside_bounds"}
+__all__ = ["CONVERGED", "CONTINUATION_FAILED", "DIVERGED", "Equilibrium", "Factorization", "MAX_ITERATIONS",
+           "OUTSIDE_BOUNDS", "factorize", "inside_bounds", "newton_krylov", "solve_equilibrium",
+           "tangent_factorization", "verify"]
+
+CONVERGED, MAX_ITERATIONS, DIVERGED, CONTINUATION_FAILED, OUTSIDE_BOUNDS = (
+    Status.CONVERGED, Status.MAX_ITERATIONS, Status.DIVERGED, Status.CONTINUATION_FAILED, Status.OUTSIDE_BOUNDS)
 
 
 @dataclass
@@ -52,6 +43,12 @@ def factorize(K) -> object:
     return sla.splu(K, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.01, options={"SymmetricMode": True})
 
 
+def tangent_factorization(model, q: np.ndarray, u: np.ndarray) -> Factorization:
+    """A fresh LU of the tangent K at the equilibrium (q, u)."""
+    _, K, _ = model.residual_and_tangent(q, u)
+    return Factorization(factorize(K), q.copy())
+
+
 @dataclass
 class Equilibrium:
     """Result of one equilibrium solve."""
@@ -63,7 +60,7 @@ class Equilibrium:
     tip: np.ndarray
     """End-effector position p_E = C q + p_E(0)."""
     status: int
-    """See the module's table of status codes; 0 means verified."""
+    """A :class:`casadi_ws.status.Status` code; 0 means verified."""
     iterations: int = 0
     """Newton iterations, all continuation steps included."""
     factorizations: int = 0
@@ -81,7 +78,7 @@ class Equilibrium:
 
     @property
     def status_name(self) -> str:
-        return STATUS_NAMES[self.status]
+        return Status(self.status).label
 
     def to_dict(self) -> dict:
         return {"tip": self.tip.tolist(), "u": self.u.tolist(), "converged": self.converged,

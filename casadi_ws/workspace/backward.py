@@ -12,10 +12,10 @@ solved from a nearby equilibrium (the neighbour the target came from). Formulati
 ``ipopt``    the full-space NLP over (q, u) (see :mod:`casadi_ws.nlp.formulations`), with exact derivatives from the
              element functions and a primal-dual warm start; the answer is then re-verified.
 
-Status codes (``BackwardResult.status``): 0 solved (a verified equilibrium, closest point found),
-1 iteration limit (the last verified equilibrium is returned), 2 an equilibrium solve or the NLP failed,
-3 gave up (reduced with ``give_up``: from the last verified equilibrium, which is returned, the linearised
-closest point lies outside the target's cell).
+Status codes (``BackwardResult.status``, :mod:`casadi_ws.status`): 0 converged (a verified equilibrium,
+closest point found), 5 iteration limit (the last verified equilibrium is returned), 6 solve failed (an
+equilibrium solve or the NLP failed), 7 gave up (reduced with ``give_up``: from the last verified
+equilibrium, which is returned, the linearised closest point lies outside the target's cell).
 """
 
 from __future__ import annotations
@@ -24,12 +24,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..solvers.equilibrium import CONVERGED, Factorization, factorize, solve_equilibrium
+from ..solvers.equilibrium import CONVERGED, Factorization, solve_equilibrium, tangent_factorization
 from ..solvers.sensitivity import bounded_step, sensitivity
+from ..status import Status
 
 __all__ = ["BackwardResult", "BackwardSettings", "backward"]
 
-SOLVED, ITERATION_LIMIT, FAILED, GAVE_UP = 0, 1, 2, 3
+SOLVED, ITERATION_LIMIT, FAILED, GAVE_UP = Status.CONVERGED, Status.ITERATION_LIMIT, Status.SOLVE_FAILED, Status.GAVE_UP
 
 
 @dataclass
@@ -89,8 +90,7 @@ def backward(model, target, q, u, fac: Factorization | None = None, scale: float
 def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardResult:
     n_eq = n_fac = 0
     if fac is None and sens is None:
-        _, K, _ = model.residual_and_tangent(q, u)
-        fac = Factorization(factorize(K), q.copy())
+        fac = tangent_factorization(model, q, u)
         n_fac += 1
     tip = model.tip(q)
     for it in range(1, settings.max_iterations + 1):
@@ -115,8 +115,7 @@ def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardRe
         if eq.factorization is not None:
             fac = eq.factorization
         elif fac is None:  # Newton needed no step and there was no LU yet
-            _, K, _ = model.residual_and_tangent(q, u)
-            fac = Factorization(factorize(K), q.copy())
+            fac = tangent_factorization(model, q, u)
             n_fac += 1
         if moved < settings.step_tolerance * scale:
             return BackwardResult(q, u, tip, SOLVED, it, n_eq, n_fac, fac)

@@ -21,18 +21,17 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from ..runtime.run_state import CHECKPOINT, fingerprint, load_checkpoint, save_checkpoint
-from ..solvers.equilibrium import (CONVERGED, OUTSIDE_BOUNDS, Equilibrium, Factorization, factorize, inside_bounds,
-                          newton_krylov, solve_equilibrium, verify)
 from ..fem.model import StaticModel
-from ..runtime.executor import deferred_interrupt, one_blas_thread, process_pool
+from ..runtime.executor import Executor, ProcessExecutor, deferred_interrupt, one_blas_thread
+from ..runtime.run_state import RunState, fingerprint
+from ..solvers.equilibrium import (CONVERGED, OUTSIDE_BOUNDS, Equilibrium, inside_bounds, newton_krylov,
+                                   solve_equilibrium, tangent_factorization, verify)
 from .result import WorkspaceResult, describe
 
-__all__ = ["ForwardSettings", "forward", "input_grid", "lagrange_weights", "line_stride", "snake_order"]
+__all__ = ["ForwardSettings", "forward", "input_grid", "lagrange_weights", "line_stride", "snake_order", "sweep"]
 
 
 @dataclass
@@ -117,9 +116,9 @@ def _predict(model, history, u, fac, mode):
             return sum(wi * qi for wi, qi in zip(lagrange_weights(xs, u[axis]), qs))
     if fac is None:
         return q_prev
-    _, dL = model.cable_lengths(q_prev)
+    # tangent predictor: K dq = H^T du
     q = q_prev.copy()
-    q[model.free] -= fac.solve(dL[:, model.free].T @ (u - u_prev))
+    q[model.free] += fac.solve(model.actuation_matrix(q_prev).T @ (u - u_prev))
     return q
 
 
@@ -252,7 +251,7 @@ def _solve_line(model, us, first, settings, tol, sw: _Sweep, counters):
     return out
 
 
-def _sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progress=None,
+def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progress=None,
            resume: dict | None = None, checkpoint=None, line_length: int | None = None):
     """Solve the equilibria at ``us`` (whole grid lines of ``line_length`` points, default n_d, in sweep
     order); returns per-point arrays and counters.
@@ -282,8 +281,7 @@ def _sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progre
             sw.start = (resume["start_q"], resume["start_u"])
         if sw.history:  # the LU is not saved: refactorise at the last verified point (tangent predictor)
             u_last, q_last = sw.history[-1]
-            _, K, _ = model.residual_and_tangent(q_last, u_last)
-            sw.fac = Factorization(factorize(K), q_last.copy())
+            sw.fac = tangent_factorization(model, q_last, u_last)
         if progress is not None:
             progress(first)
 
@@ -328,24 +326,24 @@ def _sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progre
     return tips, status, residual, states, counters
 
 
-def _worker(args):
-    problem, us, settings = args
-    model = StaticModel(problem)
-    return _sweep(model, us, settings)
+def _sweep_job(model, us, settings):
+    return sweep(model, us, settings)
 
 
 def forward(problem, n_d: int | None = None, settings: ForwardSettings | None = None,
-            model: StaticModel | None = None, checkpoint_dir=None, resume: bool = False) -> WorkspaceResult:
+            model: StaticModel | None = None, checkpoint_dir=None, resume: bool = False,
+            executor: Executor | None = None) -> WorkspaceResult:
     """Estimate the workspace by the forward method; see :class:`ForwardSettings`.
 
     With ``checkpoint_dir``, the run saves a checkpoint there every ``settings.checkpoint_every`` seconds
     and when interrupted (Ctrl-C); ``resume=True`` continues from it (see :mod:`casadi_ws.runtime.run_state`).
+    ``executor`` runs slices of the grid (default: ``settings.workers`` processes, or this process).
     """
     with one_blas_thread():
-        return _forward(problem, n_d, settings, model, checkpoint_dir, resume)
+        return _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor)
 
 
-def _forward(problem, n_d, settings, model, checkpoint_dir=None, resume=False) -> WorkspaceResult:
+def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) -> WorkspaceResult:
     settings = settings or ForwardSettings()
     if n_d is not None:
         settings.n_d = int(n_d)
@@ -363,73 +361,67 @@ def _forward(problem, n_d, settings, model, checkpoint_dir=None, resume=False) -
 
         bar = tqdm(total=n, desc="forward", unit="pt", mininterval=0.5, leave=False)
     t1 = time.perf_counter()
-    workers = max(1, min(int(settings.workers), n // 50 or 1))
+    workers = executor.workers if executor is not None else settings.workers
+    workers = max(1, min(int(workers), n // 50 or 1))
     fp = fingerprint("forward", model, {k: getattr(settings, k) for k in
                                         ("n_d", "predictor", "reuse_factorization", "krylov", "tol", "max_iter",
                                          "store_states", "stride")} | {"workers": workers})
-    saved_meta, saved = ({}, None)
-    if resume:
-        if checkpoint_dir is None:
-            raise ValueError("resume needs the checkpoint directory")
-        saved_meta, saved = load_checkpoint(checkpoint_dir, fp)
-    previous = float(saved_meta.get("elapsed", 0.0))
-
-    def save(meta, arrays):
-        if checkpoint_dir is not None:
-            save_checkpoint(checkpoint_dir, {"fingerprint": fp, "method": "forward",
-                                             "elapsed": previous + time.perf_counter() - t0, **meta}, arrays)
-
+    run = RunState(checkpoint_dir, "forward", fp, resume, t0)
     try:
         if workers == 1:
             resume_state = None
-            if saved is not None:
-                resume_state = dict(saved, next=saved_meta["next"], counters=saved_meta["counters"])
+            if run.saved is not None:
+                meta, arrays = run.saved
+                resume_state = dict(arrays, next=meta["next"], counters=meta["counters"])
 
             def checkpoint(st):
-                save({"next": st["next"], "counters": st["counters"]},
-                     {k: v for k, v in st.items() if k not in ("next", "counters")})
+                run.save({"next": st["next"], "counters": st["counters"]},
+                         {k: v for k, v in st.items() if k not in ("next", "counters")})
 
-            tips, status, residual, states, counters = _sweep(
+            tips, status, residual, states, counters = sweep(
                 model, us, settings, progress=bar.update if bar else None, resume=resume_state,
                 checkpoint=checkpoint if checkpoint_dir is not None else None)
         else:
-            tips, status, residual, states, counters = _parallel(problem, us, settings, workers, bar,
-                                                                 saved_meta, saved, save)
+            own = executor is None
+            executor = executor or ProcessExecutor(workers)
+            try:
+                tips, status, residual, states, counters = _parallel(problem, us, settings, workers, bar, run,
+                                                                     executor)
+            finally:
+                if own:
+                    executor.close()
     finally:
         if bar is not None:
             bar.close()
     t_sweep = time.perf_counter() - t1
-    if checkpoint_dir is not None:
-        (Path(checkpoint_dir) / CHECKPOINT).unlink(missing_ok=True)  # complete: the result files replace it
+    run.finish()
 
     ok = status == CONVERGED
-    rest = model.p0
     counters["points"] = n
-    result = WorkspaceResult(
+    return WorkspaceResult(
         method="forward", points=tips[ok], u=us[ok], failed_u=us[~ok], failed_status=status[~ok],
         failed_residual=residual[~ok], states=states[ok] if states is not None else None, counters=counters,
-        timings={"build_model": t_model, "sweep": t_sweep, "total": time.perf_counter() - t0 + previous,
-                 "per_point": t_sweep / n, "before_resume": previous},
-        settings={**asdict(settings), "workers": workers}, problem=describe(problem, model), rest_tip=rest)
-    return result
+        timings={"build_model": t_model, "sweep": t_sweep, "total": run.elapsed(),
+                 "per_point": t_sweep / n, "before_resume": run.previous},
+        settings={**asdict(settings), "workers": workers}, problem=describe(problem, model), rest_tip=model.p0)
 
 
-def _parallel(problem, us, settings, workers, bar, saved_meta, saved, save):
+def _parallel(problem, us, settings, workers, bar, run: RunState, executor: Executor):
     """Slices of whole grid lines, several per worker; each completed slice is checkpointed."""
-    from concurrent.futures import as_completed
-
     n_lines = max(1, len(us) // settings.n_d)
     L = settings.n_d
     # two pieces per worker: each starts cold (~1 s of continuation from rest), so more cost more
     pieces = [np.arange(lines[0] * L, (lines[-1] + 1) * L)
               for lines in np.array_split(np.arange(n_lines), min(n_lines, 2 * workers))]
     results = [None] * len(pieces)
-    piece_counters = {int(k): v for k, v in saved_meta.get("pieces", {}).items()}
-    for i in piece_counters:
-        results[i] = (saved[f"tips_{i}"], saved[f"status_{i}"], saved[f"residual_{i}"],
-                      saved.get(f"states_{i}"), piece_counters[i])
-        if bar is not None:
-            bar.update(len(pieces[i]))
+    if run.saved is not None:
+        saved_meta, saved = run.saved
+        for i, c in saved_meta.get("pieces", {}).items():
+            i = int(i)
+            results[i] = (saved[f"tips_{i}"], saved[f"status_{i}"], saved[f"residual_{i}"],
+                          saved.get(f"states_{i}"), c)
+            if bar is not None:
+                bar.update(len(pieces[i]))
 
     def checkpoint():
         arrays = {}
@@ -438,26 +430,17 @@ def _parallel(problem, us, settings, workers, bar, saved_meta, saved, save):
                 arrays.update({f"tips_{i}": r[0], f"status_{i}": r[1], f"residual_{i}": r[2]})
                 if r[3] is not None:
                     arrays[f"states_{i}"] = r[3]
-        save({"pieces": {i: r[4] for i, r in enumerate(results) if r is not None}}, arrays)
+        run.save({"pieces": {i: r[4] for i, r in enumerate(results) if r is not None}}, arrays)
 
-    with process_pool(workers) as ex:
-        futs = {ex.submit(_worker, (problem, us[p], settings)): i for i, p in enumerate(pieces)
-                if results[i] is None}
-        try:
-            for f in as_completed(futs):
-                results[futs[f]] = f.result()
-                checkpoint()
-                if bar is not None:
-                    bar.update(len(pieces[futs[f]]))
-        except KeyboardInterrupt:
-            for f in futs:
-                f.cancel()
-            raise
+    todo = [i for i in range(len(pieces)) if results[i] is None]
+    for k, r in executor.map_unordered(_sweep_job, problem, [(us[pieces[i]], settings) for i in todo]):
+        results[todo[k]] = r
+        checkpoint()
+        if bar is not None:
+            bar.update(len(pieces[todo[k]]))
     tips = np.vstack([r[0] for r in results])
     status = np.concatenate([r[1] for r in results])
     residual = np.concatenate([r[2] for r in results])
     states = np.vstack([r[3] for r in results]) if settings.store_states else None
     counters = {k: sum(r[4][k] for r in results) for k in results[0][4]}
     return tips, status, residual, states, counters
-
-

@@ -16,29 +16,33 @@ cells; their tips are the reached points (the publication's red points).
 "Reached" means: the backward answer is a verified equilibrium (relative residual below tolerance, u in U)
 whose tip lies within the target's cell, i.e. at most s/2 from the target in each coordinate (the relative
 strategy uses eta/2). A target that is not reached from its first parent is recorded as explored and not
-reached; per (10) it is not tried again. Failure codes in ``failed_status``: -1 not reached (the closest
-point found lies outside the cell), -2 prefiltered (see ``FBSettings.prefilter``), >= 1 the backward
-solve failed (see :mod:`casadi_ws.workspace.backward`).
+reached; per (10) it is not tried again. Failure codes in ``failed_status`` (:mod:`casadi_ws.status`):
+8 not reached (the closest point found lies outside the cell), 9 prefiltered (see ``FBSettings.prefilter``),
+6 the backward solve failed.
+
+:func:`algorithm1` is the loop of the publication's Algorithm 1, step by step; the state it works on (the
+grid, explored and reached cells, failures, counters, checkpoints) is kept by :class:`Exploration`.
 """
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
-from pathlib import Path
 
 import numpy as np
 
-from .backward import BackwardSettings, backward
-from ..runtime.run_state import CHECKPOINT, fingerprint, load_checkpoint, save_checkpoint
-from ..solvers.equilibrium import CONVERGED, Factorization, factorize, solve_equilibrium
-from ..solvers.sensitivity import bounded_step, sensitivity
-from .interval import Grid, interval_box, neighbourhood
 from ..fem.model import StaticModel
-from ..runtime.executor import deferred_interrupt, one_blas_thread, process_pool
+from ..runtime.executor import Executor, deferred_interrupt, make_executor, one_blas_thread
+from ..runtime.run_state import RunState, fingerprint
+from ..solvers.equilibrium import CONVERGED, solve_equilibrium, tangent_factorization
+from ..solvers.sensitivity import bounded_step, sensitivity
+from ..status import Status
+from .backward import BackwardSettings, backward
+from .interval import Grid, interval_box, neighbourhood
 from .result import WorkspaceResult, describe
 
-__all__ = ["FBSettings", "forward_backward"]
+__all__ = ["Exploration", "FBSettings", "algorithm1", "forward_backward"]
 
 
 @dataclass
@@ -73,12 +77,30 @@ class FBSettings:
 
 @dataclass
 class _Config:
+    """A reached configuration: its cell, tip, state, input, and the sensitivities its expansion needs."""
+
     cell: tuple
     p: np.ndarray
-    q: np.ndarray
+    q: np.ndarray | None
     u: np.ndarray
-    A: np.ndarray  # C K^-1 H^T at this configuration (Step 1)
+    A: np.ndarray | None  # C K^-1 H^T at this configuration (Step 1)
     S: np.ndarray | None  # K^-1 H^T: the first Gauss-Newton step of its backward solves
+
+
+def algorithm1(ex: Exploration, executor: Executor, ctrl_c) -> None:
+    """The publication's Algorithm 1, from the frontier of ``ex`` until no new cell is reached."""
+    while ex.frontier and ex.counters["explored"] < ex.settings.max_cells:
+        ex.counters["iterations"] += 1
+        tasks = []
+        for cfg in ex.frontier:
+            lower, upper = ex.interval_box(cfg)  # Step 1: Theorem 1 over the remaining inputs (9)
+            candidates = ex.neighbourhood(cfg, lower, upper)  # Step 2: S_eta in the box (7)
+            targets = ex.exclude(cfg, candidates)  # Step 5: not explored before (10); prefilter
+            if targets:
+                tasks.append((cfg, targets))
+        answers = ex.backward(tasks, executor, ctrl_c)  # Step 3: problem (8) for each target
+        ex.frontier = ex.update(tasks, answers)  # Step 4: the reached carry their bound U - u (9)
+        ex.end_iteration()
 
 
 def _expand(model, q, u, A, S, targets, scale, bsettings):
@@ -97,236 +119,244 @@ def _expand(model, q, u, A, S, targets, scale, bsettings):
         if res.ok:
             fac = res.fac
             if fac is None:
-                _, K, _ = model.residual_and_tangent(res.q, res.u)
-                fac = Factorization(factorize(K), res.q.copy())
+                fac = tangent_factorization(model, res.q, res.u)
                 n_fac += 1
             A_new, S_new = sensitivity(model, res.q, fac)
         out.append((res.q, res.u, res.tip, res.status, res.ok, A_new, S_new, res.equilibrium_solves, n_fac))
     return out
 
 
-_WORKER_MODEL = None
+class Exploration:
+    """The state of Algorithm 1 and its bookkeeping.
 
+    ``frontier`` holds the configurations reached in the last iteration; ``reached`` all of them (W_Es over
+    all iterations); ``visited`` the grid cells explored (W_E-union: uniform strategy) or ``visited_pts``
+    the explored points (relative strategy); ``failed_targets``/``failed_status`` the explored targets not
+    reached, with their :class:`casadi_ws.status.Status` codes.
+    """
 
-def _worker_init(problem):
-    global _WORKER_MODEL
-    _WORKER_MODEL = StaticModel(problem)
+    def __init__(self, problem, model: StaticModel, settings: FBSettings, run: RunState, start: _Config,
+                 grid: Grid | None):
+        self.problem, self.model, self.settings, self.run, self.grid = problem, model, settings, run, grid
+        self.uniform = grid is not None
+        self.counters = dict(iterations=0, explored=0, feasible=0, backward_solves=0, equilibrium_solves=0,
+                             factorizations=0, not_reached=0, prefiltered=0, backward_failed=0,
+                             stopped_at_max_cells=False)
+        self.timings = {"step1_interval": 0.0, "step2_neighbourhood": 0.0, "step3_backward": 0.0}
+        self.bsettings = settings.backward
+        if self.bsettings.give_up is None and self.bsettings.formulation == "reduced":
+            self.bsettings = replace(self.bsettings, give_up=0.05)  # see BackwardSettings.give_up
+        self.reached = [start]
+        self.visited = {start.cell}
+        self.visited_pts = [start.p]
+        self.failed_targets, self.failed_status = [], []
+        self.frontier = [start]
 
+    # ------------------------------------------------------------------ the steps
+    def eta(self, cfg) -> float:
+        """The neighbourhood's step at cfg: the grid step, or 5 % of ||p|| (relative strategy)."""
+        return self.settings.step if self.uniform else self.settings.relative_ratio * float(np.linalg.norm(cfg.p))
 
-def _worker_expand(args):
-    return _expand(_WORKER_MODEL, *args)
+    def interval_box(self, cfg):
+        t = time.perf_counter()
+        box = interval_box(cfg.A, cfg.p, self.model.u_min - cfg.u, self.model.u_max - cfg.u)
+        self.timings["step1_interval"] += time.perf_counter() - t
+        return box
+
+    def neighbourhood(self, cfg, lower, upper) -> list[tuple[tuple, np.ndarray]]:
+        """(cell, target) of the grid points of S_eta(cfg) inside the box."""
+        t = time.perf_counter()
+        centre = self.grid.centre(cfg.cell) if self.uniform else cfg.p
+        targets, offsets = neighbourhood(centre, self.eta(cfg), lower, upper)
+        cells = [tuple(np.asarray(cfg.cell) + off) if self.uniform else (0, 0, 0) for off in offsets]
+        self.timings["step2_neighbourhood"] += time.perf_counter() - t
+        return list(zip(cells, targets))
+
+    def exclude(self, cfg, candidates) -> list[tuple[tuple, np.ndarray]]:
+        """Rule (10): drop the points explored before (and claim the others); then the prefilter."""
+        t = time.perf_counter()
+        eta = self.eta(cfg)
+        todo = []
+        for cell, target in candidates:
+            if self.uniform:
+                if cell in self.visited:
+                    continue
+                self.visited.add(cell)
+            else:
+                if np.min(np.max(np.abs(np.asarray(self.visited_pts) - target), axis=1)) < 0.5 * eta:
+                    continue
+                self.visited_pts.append(target)
+            self.counters["explored"] += 1
+            if self.settings.prefilter is not None:
+                gap = np.abs(_linear_closest(cfg.A, cfg.p, cfg.u, self.model, target) - target).max()
+                if gap > (0.5 + self.settings.prefilter) * eta:
+                    self._fail(target, Status.PREFILTERED)
+                    continue
+            todo.append((cell, target))
+        self.timings["step2_neighbourhood"] += time.perf_counter() - t
+        return todo
+
+    def backward(self, tasks, executor: Executor, ctrl_c) -> list:
+        """Step 3: the backward solves of every task, warm-started from its configuration, in task order."""
+        t = time.perf_counter()
+        jobs = [(cfg.q, cfg.u, cfg.A, cfg.S, [tg for _, tg in todo], self.eta(cfg), self.bsettings)
+                for cfg, todo in tasks]
+        order = list(range(len(jobs)))
+        if executor.workers > 1:
+            # the configurations with the most targets first, so no worker is left with a long one at the
+            # end of the iteration (the results are put back in order: same result as 1 worker)
+            order.sort(key=lambda i: -len(jobs[i][4]))
+        answers = [None] * len(jobs)
+        for k, out in executor.map_unordered(_expand, self.problem, [jobs[i] for i in order]):
+            answers[order[k]] = out
+            if executor.workers == 1:
+                ctrl_c.check()
+        ctrl_c.check()
+        self.timings["step3_backward"] += time.perf_counter() - t
+        return answers
+
+    def update(self, tasks, answers) -> list:
+        """Step 4: a target is reached when its verified answer lies in its cell; returns the new frontier."""
+        new_frontier = []
+        for (cfg, todo), out in zip(tasks, answers):
+            eta = self.eta(cfg)
+            for (cell, target), (q, u, tip, status, ok, A, S, n_eq, n_fac) in zip(todo, out):
+                self.counters["backward_solves"] += 1
+                self.counters["equilibrium_solves"] += n_eq
+                self.counters["factorizations"] += n_fac
+                if ok and np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9)):
+                    new = _Config(cell, tip, q, u, A, S)
+                    new_frontier.append(new)
+                    self.reached.append(new)
+                else:
+                    self._fail(target, Status(status) if not ok else Status.NOT_REACHED)
+            cfg.S = None  # expanded: no longer needed
+        return new_frontier
+
+    def _fail(self, target, status: Status) -> None:
+        key = {Status.PREFILTERED: "prefiltered", Status.NOT_REACHED: "not_reached"}.get(status, "backward_failed")
+        self.counters[key] += 1
+        self.failed_targets.append(target)
+        self.failed_status.append(int(status))
+
+    def end_iteration(self) -> None:
+        if not self.settings.store_states:
+            for c in self.reached:  # only the frontier's states are needed from here on
+                if c.S is None:
+                    c.q = None
+        self.save()
+        if self.settings.progress:
+            print(f"forward-backward: iteration {self.counters['iterations']}: {len(self.frontier)} new cells, "
+                  f"{len(self.reached)} reached, {self.counters['explored']} explored", file=sys.stderr)
+
+    # ------------------------------------------------------------------ checkpoints and the result
+    def save(self) -> None:
+        """A checkpoint at an iteration boundary, where the state is complete and the run deterministic."""
+        if self.run.directory is None:
+            return
+        m = self.model
+        ids = {id(c): i for i, c in enumerate(self.reached)}
+        fr = np.array(sorted(ids[id(c)] for c in self.frontier), dtype=np.int64)
+        reached = self.reached
+        arrays = dict(cells=np.array([c.cell for c in reached]), p=np.array([c.p for c in reached]),
+                      u=np.array([c.u for c in reached]), frontier=fr,
+                      frontier_q=np.array([reached[i].q for i in fr]).reshape(len(fr), m.n_dof),
+                      frontier_A=np.array([reached[i].A for i in fr]).reshape(len(fr), 3, m.n_u),
+                      frontier_S=np.array([reached[i].S for i in fr]).reshape(len(fr), m.n_free, m.n_u),
+                      visited=np.array(sorted(self.visited)).reshape(-1, 3),
+                      visited_pts=np.array(self.visited_pts).reshape(-1, 3),
+                      failed_targets=np.array(self.failed_targets).reshape(-1, 3),
+                      failed_status=np.array(self.failed_status, dtype=int))
+        if self.settings.store_states:
+            arrays["q"] = np.array([c.q for c in reached])
+        self.run.save({"counters": self.counters, "timings": self.timings}, arrays)
+
+    def restore(self, meta: dict, a: dict) -> None:
+        self.counters.update(meta["counters"])
+        self.timings.update({k: v for k, v in meta["timings"].items() if k.startswith("step")})
+        fset = set(int(i) for i in a["frontier"])
+        self.reached = []
+        for i in range(len(a["cells"])):
+            f = i in fset
+            k = int(np.searchsorted(a["frontier"], i)) if f else -1
+            self.reached.append(_Config(tuple(int(c) for c in a["cells"][i]), a["p"][i],
+                                        a["frontier_q"][k] if f else (a["q"][i] if "q" in a else None), a["u"][i],
+                                        a["frontier_A"][k] if f else None, a["frontier_S"][k] if f else None))
+        self.frontier = [self.reached[i] for i in sorted(fset)]
+        self.visited = {tuple(int(c) for c in v) for v in a["visited"]}
+        self.visited_pts = list(a["visited_pts"])
+        self.failed_targets, self.failed_status = list(a["failed_targets"]), list(a["failed_status"])
+
+    def result(self, build_model: float) -> WorkspaceResult:
+        self.counters["stopped_at_max_cells"] = bool(self.frontier)
+        self.counters["feasible"] = len(self.reached)
+        timings = {"build_model": build_model, **self.timings, "total": self.run.elapsed(),
+                   "before_resume": self.run.previous}
+        reached, settings = self.reached, self.settings
+        arrays = {"cell_step": np.array(settings.step if self.uniform else np.nan)}
+        if self.uniform:
+            arrays["cells"] = np.array([c.cell for c in reached], dtype=np.int64)
+            arrays["cells_centres"] = np.array([self.grid.centre(c.cell) for c in reached])
+            arrays["grid_origin"] = self.grid.origin
+        return WorkspaceResult(
+            method="forward-backward", points=np.array([c.p for c in reached]), u=np.array([c.u for c in reached]),
+            failed_u=np.array(self.failed_targets).reshape(-1, 3),
+            failed_status=np.array(self.failed_status, dtype=int),
+            failed_residual=np.full(len(self.failed_status), np.nan),
+            states=np.array([c.q for c in reached]) if settings.store_states else None,
+            counters=self.counters, timings=timings, settings=asdict(settings),
+            problem=describe(self.problem, self.model), rest_tip=self.model.p0, arrays=arrays)
 
 
 def forward_backward(problem, settings: FBSettings | None = None, model: StaticModel | None = None,
-                     step: float | None = None, checkpoint_dir=None, resume: bool = False) -> WorkspaceResult:
+                     step: float | None = None, checkpoint_dir=None, resume: bool = False,
+                     executor: Executor | None = None) -> WorkspaceResult:
     """Estimate the workspace by Algorithm 1; see :class:`FBSettings`.
 
     With ``checkpoint_dir``, a checkpoint is saved there after every iteration; ``resume=True`` continues
-    from it and ends with the same result as an uninterrupted run.
+    from it and ends with the same result as an uninterrupted run. ``executor`` runs the backward solves
+    (default: ``settings.workers`` processes, or this process).
     """
-    with one_blas_thread():
-        return _forward_backward(problem, settings, model, step, checkpoint_dir, resume)
-
-
-def _forward_backward(problem, settings, model, step, checkpoint_dir=None, resume=False) -> WorkspaceResult:
     settings = settings or FBSettings()
     if step is not None:
         settings.step = float(step)
     if settings.strategy not in ("uniform", "relative"):
         raise ValueError(f"strategy must be 'uniform' or 'relative', got {settings.strategy!r}")
-    t0 = time.perf_counter()
-    model = model or StaticModel(problem)
-    timings = {"build_model": time.perf_counter() - t0, "step1_interval": 0.0, "step2_neighbourhood": 0.0,
-               "step3_backward": 0.0}
-    counters = dict(iterations=0, explored=0, feasible=0, backward_solves=0, equilibrium_solves=0,
-                    factorizations=0, not_reached=0, prefiltered=0, backward_failed=0,
-                    stopped_at_max_cells=False)
+    with one_blas_thread():
+        t0 = time.perf_counter()
+        model = model or StaticModel(problem)
+        build_model = time.perf_counter() - t0
+        fp = fingerprint("forward-backward", model, asdict(settings) | {"workers": None, "progress": None})
+        run = RunState(checkpoint_dir, "forward-backward", fp, resume, t0)
 
-    # initial configuration: the equilibrium at u = u_min (U^(0) = U)
-    eq = solve_equilibrium(model, model.u_min.copy())
-    if eq.status != CONVERGED:
-        raise RuntimeError(f"no equilibrium at u = u_min ({eq.status_name}); cannot start")
-    counters["equilibrium_solves"] += 1
-    p0 = eq.tip
-    uniform = settings.strategy == "uniform"
-    grid = Grid(p0, settings.step) if uniform else None
-    _, K, _ = model.residual_and_tangent(eq.q, eq.u)
-    A0, S0 = sensitivity(model, eq.q, Factorization(factorize(K), eq.q))
-    counters["factorizations"] += 1
-    start = _Config(grid.index(p0) if uniform else (0, 0, 0), p0, eq.q, eq.u.copy(), A0, S0)
+        # initial configuration: the equilibrium at u = u_min (U^(0) = U)
+        eq = solve_equilibrium(model, model.u_min.copy())
+        if eq.status != CONVERGED:
+            raise RuntimeError(f"no equilibrium at u = u_min ({eq.status_name}); cannot start")
+        grid = Grid(eq.tip, settings.step) if settings.strategy == "uniform" else None
+        A0, S0 = sensitivity(model, eq.q, tangent_factorization(model, eq.q, eq.u))
+        start = _Config(grid.index(eq.tip) if grid else (0, 0, 0), eq.tip, eq.q, eq.u.copy(), A0, S0)
+        ex = Exploration(problem, model, settings, run, start, grid)
+        ex.counters["equilibrium_solves"] += 1
+        ex.counters["factorizations"] += 1
+        if run.saved is not None:
+            ex.restore(*run.saved)
 
-    reached = [start]  # feasible configurations: W_Es over all iterations
-    visited = {start.cell}  # W_E-union: grid points already explored (uniform) ...
-    visited_pts = [p0]  # ... or their positions (relative strategy)
-    failed_targets, failed_status = [], []
-    frontier = [start]
+        own = executor is None
+        executor = executor or make_executor(settings.workers, model)
+        try:
+            with deferred_interrupt() as ctrl_c:  # Ctrl-C stops between solves; the last checkpoint stays
+                algorithm1(ex, executor, ctrl_c)
+        finally:
+            if own:
+                executor.close()
+        if settings.backward.formulation == "ipopt":
+            from ..nlp.formulations import release_solvers
 
-    # checkpoints at iteration boundaries, where the state is complete and the run deterministic
-    fp = fingerprint("forward-backward", model, asdict(settings) | {"workers": None, "progress": None})
-    previous = 0.0
-    if resume:
-        if checkpoint_dir is None:
-            raise ValueError("resume needs the checkpoint directory")
-        meta, a = load_checkpoint(checkpoint_dir, fp)
-        previous = float(meta["elapsed"])
-        counters.update(meta["counters"])
-        timings.update({k: v for k, v in meta["timings"].items() if k.startswith("step")})
-        fset = set(int(i) for i in a["frontier"])
-        reached = []
-        for i in range(len(a["cells"])):
-            f = i in fset
-            k = int(np.searchsorted(a["frontier"], i)) if f else -1
-            reached.append(_Config(tuple(int(c) for c in a["cells"][i]), a["p"][i],
-                                   a["frontier_q"][k] if f else (a["q"][i] if "q" in a else None), a["u"][i],
-                                   a["frontier_A"][k] if f else None, a["frontier_S"][k] if f else None))
-        frontier = [reached[i] for i in sorted(fset)]
-        visited = {tuple(int(c) for c in v) for v in a["visited"]}
-        visited_pts = list(a["visited_pts"])
-        failed_targets, failed_status = list(a["failed_targets"]), list(a["failed_status"])
-
-    def checkpoint():
-        if checkpoint_dir is None:
-            return
-        ids = {id(c): i for i, c in enumerate(reached)}
-        fr = np.array(sorted(ids[id(c)] for c in frontier), dtype=np.int64)
-        arrays = dict(cells=np.array([c.cell for c in reached]), p=np.array([c.p for c in reached]),
-                      u=np.array([c.u for c in reached]), frontier=fr,
-                      frontier_q=np.array([reached[i].q for i in fr]).reshape(len(fr), model.n_dof),
-                      frontier_A=np.array([reached[i].A for i in fr]).reshape(len(fr), 3, model.n_u),
-                      frontier_S=np.array([reached[i].S for i in fr]).reshape(len(fr), model.n_free, model.n_u),
-                      visited=np.array(sorted(visited)).reshape(-1, 3),
-                      visited_pts=np.array(visited_pts).reshape(-1, 3),
-                      failed_targets=np.array(failed_targets).reshape(-1, 3),
-                      failed_status=np.array(failed_status, dtype=int))
-        if settings.store_states:
-            arrays["q"] = np.array([c.q for c in reached])
-        save_checkpoint(checkpoint_dir, {"fingerprint": fp, "method": "forward-backward", "counters": counters,
-                                         "timings": timings,
-                                         "elapsed": previous + time.perf_counter() - t0}, arrays)
-
-    bsettings = settings.backward
-    if bsettings.give_up is None and bsettings.formulation == "reduced":
-        bsettings = replace(bsettings, give_up=0.05)  # see BackwardSettings.give_up
-    pool = _pool(problem, settings.workers) if settings.workers > 1 else None
-    interrupt = deferred_interrupt()
-    ctrl_c = interrupt.__enter__()  # Ctrl-C stops between configurations; the last iteration's checkpoint stays
-    try:
-        while frontier and counters["explored"] < settings.max_cells:
-            counters["iterations"] += 1
-            tasks = []
-            for cfg in frontier:
-                # Step 1: interval over-estimation at cfg, with its input bound (9)
-                t = time.perf_counter()
-                lower, upper = interval_box(cfg.A, cfg.p, model.u_min - cfg.u, model.u_max - cfg.u)
-                timings["step1_interval"] += time.perf_counter() - t
-
-                # Step 2 (7) and Step 5 (10): neighbours in the box, not yet explored
-                t = time.perf_counter()
-                if uniform:
-                    centre, eta = grid.centre(cfg.cell), settings.step
-                else:
-                    centre, eta = cfg.p, settings.relative_ratio * float(np.linalg.norm(cfg.p))
-                targets, offsets = neighbourhood(centre, eta, lower, upper)
-                todo = []
-                for target, off in zip(targets, offsets):
-                    cell = tuple(np.asarray(cfg.cell) + off) if uniform else (0, 0, 0)
-                    if uniform:
-                        if cell in visited:
-                            continue
-                        visited.add(cell)
-                    else:
-                        if np.min(np.max(np.abs(np.asarray(visited_pts) - target), axis=1)) < 0.5 * eta:
-                            continue
-                        visited_pts.append(target)
-                    counters["explored"] += 1
-                    if settings.prefilter is not None:
-                        gap = np.abs(_linear_closest(cfg.A, cfg.p, cfg.u, model, target) - target).max()
-                        if gap > (0.5 + settings.prefilter) * eta:
-                            counters["prefiltered"] += 1
-                            failed_targets.append(target)
-                            failed_status.append(-2)
-                            continue
-                    todo.append((cell, target))
-                timings["step2_neighbourhood"] += time.perf_counter() - t
-                if todo:
-                    tasks.append((cfg, todo, eta))
-
-            # Step 3: backward problem (8) for each kept target, warm-started from its configuration
-            t = time.perf_counter()
-            jobs = [(cfg.q, cfg.u, cfg.A, cfg.S, [tg for _, tg in todo], eta, bsettings)
-                    for cfg, todo, eta in tasks]
-            if pool is None:
-                outs = []
-                for j in jobs:
-                    outs.append(_expand(model, *j))
-                    ctrl_c.check()
-            else:
-                # the configurations with the most targets first, so no worker is left with a long one at
-                # the end of the iteration (the results are put back in order: same result as 1 worker)
-                order = sorted(range(len(jobs)), key=lambda i: -len(jobs[i][4]))
-                outs = [None] * len(jobs)
-                for i, out in zip(order, pool.map(_worker_expand, [jobs[i] for i in order])):
-                    outs[i] = out
-                ctrl_c.check()
-            new_frontier = []
-            for (cfg, todo, eta), out in zip(tasks, outs):
-                for (cell, target), (q, u, tip, status, ok, A, S, n_eq, n_fac) in zip(todo, out):
-                    counters["backward_solves"] += 1
-                    counters["equilibrium_solves"] += n_eq
-                    counters["factorizations"] += n_fac
-                    if ok and np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9)):
-                        new = _Config(cell, tip, q, u, A, S)  # Step 4: carries its bound U - u
-                        new_frontier.append(new)
-                        reached.append(new)
-                    else:
-                        counters["backward_failed" if not ok else "not_reached"] += 1
-                        failed_targets.append(target)
-                        failed_status.append(status if not ok else -1)
-                cfg.S = None  # expanded: no longer needed
-            timings["step3_backward"] += time.perf_counter() - t
-            frontier = new_frontier
-            if not settings.store_states:
-                for c in reached:  # only the frontier's states are needed from here on
-                    if c.S is None:
-                        c.q = None
-            checkpoint()
-            if settings.progress:
-                import sys
-
-                print(f"forward-backward: iteration {counters['iterations']}: {len(new_frontier)} new cells, "
-                      f"{len(reached)} reached, {counters['explored']} explored", file=sys.stderr)
-    finally:
-        interrupt.__exit__(None, None, None)
-        if pool is not None:
-            pool.shutdown(cancel_futures=True)
-    if settings.backward.formulation == "ipopt":
-        from ..nlp.formulations import release_solvers
-
-        release_solvers()
-    counters["stopped_at_max_cells"] = bool(frontier)
-    counters["feasible"] = len(reached)
-    timings["total"] = time.perf_counter() - t0 + previous
-    timings["before_resume"] = previous
-    if checkpoint_dir is not None:
-        (Path(checkpoint_dir) / CHECKPOINT).unlink(missing_ok=True)  # complete: the result files replace it
-
-    pts = np.array([c.p for c in reached])
-    arrays = {"cell_step": np.array(settings.step if uniform else np.nan)}
-    if uniform:
-        arrays["cells"] = np.array([c.cell for c in reached], dtype=np.int64)
-        arrays["cells_centres"] = np.array([grid.centre(c.cell) for c in reached])
-        arrays["grid_origin"] = grid.origin
-    return WorkspaceResult(
-        method="forward-backward", points=pts, u=np.array([c.u for c in reached]),
-        failed_u=np.array(failed_targets).reshape(-1, 3), failed_status=np.array(failed_status, dtype=int),
-        failed_residual=np.full(len(failed_status), np.nan),
-        states=np.array([c.q for c in reached]) if settings.store_states else None,
-        counters=counters, timings=timings, settings=asdict(settings), problem=describe(problem, model),
-        rest_tip=model.p0, arrays=arrays)
-
-
-def _pool(problem, workers):
-    return process_pool(workers, _worker_init, (problem,))
+            release_solvers()
+        result = ex.result(build_model)
+        run.finish()
+        return result
 
 
 def _linear_closest(A, p, u, model, target):

@@ -39,7 +39,7 @@ class WorkspaceResult:
     failed_u: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     """Inputs (or targets, for forward-backward) whose solve failed (f, n_u or 3)."""
     failed_status: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
-    """Status code of each failure (see :mod:`casadi_ws.solvers.equilibrium`)."""
+    """:class:`casadi_ws.status.Status` code of each failure."""
     failed_residual: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """Relative residual reached by each failure."""
     states: np.ndarray | None = None
@@ -166,8 +166,9 @@ def describe(problem, model) -> dict:
     """Plain-data description of what was solved, for result files."""
     return {
         "name": problem.name, "source": problem.source, "n_nodes": problem.mesh.n_nodes,
-        "n_tets": problem.mesh.n_tets, "n_free_dofs": model.n_free, "material": asdict(problem.material),
-        "n_u": model.n_u, "cables": [c.name for c in problem.cables], "u_min": model.u_min.tolist(),
-        "u_max": model.u_max.tolist(), "end_effector": np.asarray(problem.end_effector).tolist(),
-        "tolerance": problem.solver.tolerance,
+        "n_tets": problem.mesh.n_tets, "element": problem.mesh.element.name, "n_free_dofs": model.n_free,
+        "material": asdict(problem.material), "n_u": model.n_u,
+        "actuators": [{"name": a.name, "kind": a.kind, "unit": a.input_unit} for a in model.actuators],
+        "u_min": model.u_min.tolist(), "u_max": model.u_max.tolist(),
+        "end_effector": np.asarray(problem.end_effector).tolist(), "tolerance": problem.solver.tolerance,
     }

@@ -1,0 +1,82 @@
+"""The actuator interface: what the model, the NLP library and the methods need to know of an actuator.
+
+An actuator is a self-contained component (like a SOFA constraint): it names the material points it acts
+on, by their rest positions, and gives one scalar *quantity* Q of their current positions as a CasADi SX
+expression (a cable: its length; a cavity: its volume). Everything else is derived from Q by CasADi:
+
+    force on the nodes   u * sign * dQ/dx      (the row of H is sign * dQ/dx)
+    tangent stiffness    -u * sign * d2Q/dx2   with the true sparsity of the SX Hessian
+    NLP Hessian terms    third derivatives of Q, again by CasADi
+
+``sign`` is the sign of the virtual work u * sign * dQ: a cable's tension does work by shortening it
+(sign -1), a cavity's pressure by growing it (sign +1). The model embeds the points in the mesh (a gather
+map W with positions = W x) and iterates over actuators; it knows no actuator kind.
+
+Adding an actuator kind is one module with a class implementing this interface, plus its problem-file
+reader.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+__all__ = ["Actuator", "quantity_functions"]
+
+
+class Actuator:
+    """Base class of actuators; subclasses set the attributes and implement :meth:`rest_points` and
+    :meth:`quantity`."""
+
+    kind: str = "actuator"
+    """The actuator kind, as result files name it (``cable``)."""
+    input_unit: str = ""
+    """Unit of the input u (``N`` for a cable tension, ``Pa`` for a pressure)."""
+    quantity_name: str = ""
+    """Name of Q (``length``, ``volume``)."""
+    quantity_unit: str = ""
+    """Unit of Q (``m``, ``m^3``)."""
+    sign: float = 1.0
+    """Sign of the virtual work u * sign * dQ (see the module's docstring)."""
+    name: str
+    u_min: float
+    u_max: float
+
+    def rest_points(self) -> np.ndarray:
+        """Rest positions (k, 3) of the material points Q depends on, in metres."""
+        raise NotImplementedError
+
+    def quantity(self, P: ca.SX) -> ca.SX:
+        """Q as a scalar SX expression of the stacked current positions P (3k, point-major) of
+        :meth:`rest_points`."""
+        raise NotImplementedError
+
+    def describe(self) -> dict:
+        """Plain data that determines the actuator (for result files and checkpoint fingerprints)."""
+        return {"kind": self.kind, "name": self.name, "u_min": float(self.u_min), "u_max": float(self.u_max),
+                "points": np.asarray(self.rest_points(), dtype=float).tolist()}
+
+
+def quantity_functions(actuator: Actuator) -> dict:
+    """CasADi pieces of one actuator, derived from its quantity Q(P), P (3k) the stacked point positions:
+
+    ``P``, ``Q``, ``dQ``, ``d2Q``   the SX symbol, Q, dQ/dP and the nonzeros of d2Q/dP2 (column-major in
+                                  ``hessian_sparsity``); the model stacks these of all actuators into one
+                                  function, as one CasADi call costs more than the arithmetic
+    ``hessian_sparsity``          the structural pattern of d2Q/dP2 that CasADi derives from Q
+    ``third``                     Function (P, mu) -> d2(mu . dQ/dP)/dP2, dense (3k x 3k): the
+                                  actuator's share of a Lagrangian Hessian
+    """
+    k = np.asarray(actuator.rest_points()).shape[0]
+    P = ca.SX.sym("P", 3 * k)
+    Q = actuator.quantity(P)
+    g = ca.gradient(Q, P)
+    H = ca.hessian(Q, P)[0]
+    mu = ca.SX.sym("mu", 3 * k)
+    T = ca.hessian(ca.dot(mu, g), P)[0]
+    return {
+        "P": P, "Q": Q, "dQ": g,
+        "d2Q": ca.vertcat(*H.nonzeros()) if H.nnz() else ca.SX.zeros(0, 1),
+        "hessian_sparsity": H.sparsity(),
+        "third": ca.Function(f"{actuator.kind}_third", [P, mu], [ca.densify(T)], ["P", "mu"], ["T"]),
+    }
