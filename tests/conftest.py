@@ -14,7 +14,10 @@ from casadi_ws.io.problem import nodes_in_box, nodes_on_plane
 os.environ.setdefault("CASADI_WS_CACHE", str(Path(tempfile.gettempdir()) / "casadi-ws-test-cache"))
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared" / "meshes"
+# SOFA's meshes, shipped with the repository (SoftRobots plugin scenes): the trunk with the problems, the
+# finger and diamond with the tests
+SOFA_TRUNK = REPO / "problems" / "meshes" / "trunk.vtk"
+MESHES = REPO / "tests" / "meshes"
 
 
 def cantilever(n=2, slender=10, model="linear", nu=0.3, E=1e6, L=0.2, cable_offset=None, loads=()):

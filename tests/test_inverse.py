@@ -50,13 +50,27 @@ def test_follow_a_circle_inside_the_workspace(tmp_path):
     assert np.loadtxt(tmp_path / "f.csv", delimiter=",", skiprows=1).shape == (13, 10)
 
 
-def test_regularization_and_change_limit():
+def test_change_limit():
     pb = small_trunk("corotational", n_cables=2)
     m = StaticModel(pb)
     tip = solve_equilibrium(m, [40.0, 40.0]).tip
     start = solve_equilibrium(m, [0.0, 0.0])
     r = reach(m, tip, q0=start.q, u0=start.u, settings=ReachSettings(max_du=10.0))
     assert not r.reachable and np.all(r.u <= 10.0 + 1e-9)  # 40 N is out of a 10 N step
+
+
+def test_regularization_trades_distance_for_lower_tensions():
+    """rho |u|^2 pulls the answer towards u = 0: lower tensions, a tip short of the target, both verified."""
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    tip = solve_equilibrium(m, [60.0, 30.0]).tip
+    plain = reach(m, tip)
+    assert plain.reachable and np.allclose(plain.u, [60.0, 30.0], atol=1e-3)
+    reg = reach(m, tip, settings=ReachSettings(regularization=1e-8))
+    assert not reg.reachable and 1e-5 < reg.error < 1e-2  # noticeably off the target, not far
+    assert np.linalg.norm(reg.u) < np.linalg.norm(plain.u) - 1.0
+    eq = solve_equilibrium(m, reg.u)  # the answer is an equilibrium at its u
+    assert eq.converged and np.linalg.norm(eq.tip - reg.tip) < 1e-8
 
 
 def test_cli_reach_and_follow(tmp_path):
@@ -91,3 +105,18 @@ def test_orientation_with_extra_points_round_trip(rng):
     assert r.reachable
     np.testing.assert_allclose((W @ (m.X + r.q)).reshape(-1, 3), goals, atol=1e-6)
     np.testing.assert_allclose(r.u, u, rtol=1e-4, atol=1e-3)  # with orientation, u is determined here
+
+
+def test_reach_with_different_extra_points_of_the_same_count(rng):
+    """Each set of extra points is its own problem (NLPs were once cached by the number of points)."""
+    from casadi_ws.fem.mesh import embed
+
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    eq = solve_equilibrium(m, rng.uniform(pb.u_min, pb.u_max))
+    for extra in ([[0.002, 0.0, 0.19]], [[0.0, -0.002, 0.17]]):
+        W = embed(m.mesh, np.array(extra)).matrix(m.mesh)
+        goal = (W @ (m.X + eq.q)).reshape(-1, 3)
+        r = reach(m, eq.tip, settings=ReachSettings(extra_points=extra), extra_targets=goal)
+        assert r.reachable
+        np.testing.assert_allclose((W @ (m.X + r.q)).reshape(-1, 3), goal, atol=1e-6)

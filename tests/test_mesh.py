@@ -3,14 +3,13 @@
 import meshio
 import numpy as np
 import pytest
-from conftest import SHARED
+from conftest import MESHES, SOFA_TRUNK
 
 from casadi_ws import Cable, Material, MeshError, Problem, StaticModel, box_mesh, load_mesh, trunk_mesh
 from casadi_ws import solve_equilibrium, trunk_cable
 from casadi_ws.fem.mesh import embed
 from casadi_ws.io.problem import nodes_in_box, tip_centre
 
-needs_shared = pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/meshes not present")
 
 
 def test_trunk_generator_defaults_match_sofa_trunk():
@@ -65,9 +64,8 @@ def test_inverted_and_degenerate_tetrahedra_are_named(tmp_path):
         load_mesh(tmp_path / "tri.vtk")
 
 
-@needs_shared
 def test_sofa_trunk_loads_and_bends_towards_pulled_cable():
-    mesh = load_mesh(SHARED / "trunk.vtk", scale=0.001)
+    mesh = load_mesh(SOFA_TRUNK, scale=0.001)
     assert (mesh.n_nodes, mesh.n_tets) == (709, 1972)
     cables = [trunk_cable(0, "long"), trunk_cable(90, "long")]
     assert embed(mesh, cables[0].points).outside.max() > 0  # grooves: some points lie outside
@@ -79,9 +77,8 @@ def test_sofa_trunk_loads_and_bends_towards_pulled_cable():
     assert eq.tip[0] > 0.01 and abs(eq.tip[1]) < 0.1 * eq.tip[0]
 
 
-@needs_shared
 def test_sofa_finger_and_diamond_load_and_solve():
-    finger = load_mesh(SHARED / "finger.vtk", scale=0.001)
+    finger = load_mesh(MESHES / "finger.vtk", scale=0.001)
     xs = np.linspace(-0.015, -0.095, 9)
     cable = Cable(np.column_stack([xs, np.full_like(xs, 0.0035), np.full_like(xs, 0.0075)]),
                   np.array([0.0, 0.0035, 0.0075]), 0.0, 5.0)
@@ -90,7 +87,7 @@ def test_sofa_finger_and_diamond_load_and_solve():
     eq = solve_equilibrium(StaticModel(pb), [2.0])
     assert eq.converged and eq.tip[1] < 0.0075 - 1e-3  # the cable on the y = 3.5 mm side curls it that way
 
-    diamond = load_mesh(SHARED / "diamond.vtu", scale=0.001)
+    diamond = load_mesh(MESHES / "diamond.vtu", scale=0.001)
     assert diamond.n_tets == 4147
     arms = [np.array([0.09, 0.0, 0.0]), np.array([-0.09, 0.0, 0.0]), np.array([0.0, 0.0, 0.09])]
     cables = [Cable(a[None], np.array([0.0, -0.12, 0.0]), 0.0, 5.0, f"arm{i}") for i, a in enumerate(arms)]

@@ -1,6 +1,7 @@
 """scripts/reproduce_paper.py --quick runs end to end, so the reproduction script cannot rot."""
 
 import csv
+import json
 import subprocess
 import sys
 
@@ -20,3 +21,9 @@ def test_reproduce_paper_quick(tmp_path):
     assert len(rows) == 4 and rows[0][1] == "n_u"
     report = (tmp_path / "report.md").read_text()
     assert "Claims, tested by the data" in report and "coverage" in report
+    # every claim of the report must hold on the data, and the report must say what the data say
+    claims = json.loads((tmp_path / "claims.json").read_text())
+    assert len(claims) == 5
+    for c in claims:
+        assert c["holds"], c["text"]
+        assert c["text"] in report and "does NOT hold" not in c["text"]
