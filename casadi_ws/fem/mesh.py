@@ -54,14 +54,19 @@ class Mesh:
     def n_tets(self) -> int:
         return self.tets.shape[0]
 
+    @property
+    def corners(self) -> np.ndarray:
+        """Node indices of the tetrahedra's four corners (m, 4): every element type lists them first."""
+        return self.tets[:, :4]
+
     def volumes(self) -> np.ndarray:
         """Volumes of the tetrahedra spanned by the corners (m,)."""
-        X = self.nodes[self.tets[:, :4]]
+        X = self.nodes[self.corners]
         return np.einsum("ij,ij->i", np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), X[:, 3] - X[:, 0]) / 6
 
     def check(self) -> None:
         """Reject degenerate and inverted tetrahedra, naming the first offending element."""
-        X = self.nodes[self.tets[:, :4]]
+        X = self.nodes[self.corners]
         V = self.volumes()
         edges = [X[:, i] - X[:, j] for i, j in ((1, 0), (2, 0), (3, 0), (2, 1), (3, 1), (3, 2))]
         h = np.mean([np.linalg.norm(e, axis=1) for e in edges], axis=0)
@@ -107,7 +112,7 @@ def load_mesh(path: str | Path, scale: float = 1.0) -> Mesh:
     nodes = np.asarray(m.points, dtype=float)[used, :3] * float(scale)
     if not np.all(np.isfinite(nodes)):
         raise MeshError(f"{path}: node coordinates contain NaN or infinite values")
-    mesh = Mesh(nodes, inverse.reshape(-1, 4), str(path), np.arange(tets.shape[0]))
+    mesh = Mesh(nodes, inverse.reshape(tets.shape), str(path), np.arange(tets.shape[0]))
     mesh.check()
     return mesh
 
@@ -227,7 +232,7 @@ def embed(mesh: Mesh, points: np.ndarray) -> Embedding:
     """
     points = np.atleast_2d(np.asarray(points, dtype=float))
     element = mesh.element
-    X = mesh.nodes[mesh.tets[:, :4]]
+    X = mesh.nodes[mesh.corners]
     T = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2)
     Tinv = np.linalg.inv(T)
     centroids = X.mean(axis=1)

@@ -98,7 +98,7 @@ def _render_pyvista(results, path, mesh, title):
 
     pl = pv.Plotter(off_screen=True, window_size=(1200, 900))
     if mesh is not None:
-        grid = pv.UnstructuredGrid({pv.CellType.TETRA: mesh.tets[:, :4]}, mesh.nodes * 1e3)
+        grid = pv.UnstructuredGrid({pv.CellType.TETRA: mesh.corners}, mesh.nodes * 1e3)
         pl.add_mesh(grid.extract_surface(algorithm="dataset_surface"), color="lightgray", opacity=0.35, show_edges=False)
     for i, r in enumerate(results):
         st = _style(r, i)

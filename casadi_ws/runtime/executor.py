@@ -105,25 +105,33 @@ class SerialExecutor(Executor):
             yield i, fn(model, *job)
 
 
-def _init_worker():
+def _init_worker(key, blob):
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(limits=1, user_api="blas")  # for the worker's lifetime
+    if blob is not None:
+        model_for(blob, key)  # built while the caller still prepares the first jobs
 
 
 class ProcessExecutor(Executor):
-    """A pool of ``workers`` fresh processes, each with one BLAS thread and its own models."""
+    """A pool of ``workers`` fresh processes, each with one BLAS thread and its own models.
 
-    def __init__(self, workers: int):
+    Given a ``problem``, every worker builds its model at start and jobs of that problem send no copy of it;
+    jobs of other problems carry it (pickled once per call, unpickled by a worker only to build its model).
+    """
+
+    def __init__(self, workers: int, problem=None):
         self.workers = int(workers)
         for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ.setdefault(var, "1")  # inherited by the children before they import numpy
-        self._pool = ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"), initializer=_init_worker)
+        self._key = None if problem is None else problem_fingerprint(problem)
+        blob = None if problem is None else pickle.dumps(problem, protocol=4)
+        self._pool = ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"), initializer=_init_worker,
+                                         initargs=(self._key, blob))
 
     def map_unordered(self, fn, problem, jobs):
-        # the problem travels pickled once per call; a worker unpickles it only to build its first model
-        blob = pickle.dumps(problem, protocol=4)
         key = problem_fingerprint(problem)
+        blob = None if key == self._key else pickle.dumps(problem, protocol=4)
         futures = {self._pool.submit(_call, fn, key, blob, job): i for i, job in enumerate(jobs)}
         pending = set(futures)
         try:
@@ -139,9 +147,9 @@ class ProcessExecutor(Executor):
         self._pool.shutdown(cancel_futures=True)
 
 
-def make_executor(workers: int, model=None) -> Executor:
-    """``SerialExecutor(model)`` for one worker, else a ``ProcessExecutor``."""
-    return SerialExecutor(model) if int(workers) <= 1 else ProcessExecutor(workers)
+def make_executor(workers: int, model=None, problem=None) -> Executor:
+    """``SerialExecutor(model)`` for one worker, else a ``ProcessExecutor`` (set up for ``problem``)."""
+    return SerialExecutor(model) if int(workers) <= 1 else ProcessExecutor(workers, problem)
 
 
 class _Deferred:

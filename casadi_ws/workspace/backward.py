@@ -59,17 +59,26 @@ class BackwardSettings:
 
 @dataclass
 class BackwardResult:
+    """Answer of the backward problem (8): always a verified equilibrium (the start if nothing better)."""
+
     q: np.ndarray
+    """Nodal displacements of the answer (3n)."""
     u: np.ndarray
+    """Its inputs."""
     tip: np.ndarray
+    """Its end-effector position."""
     status: int
+    """A :class:`casadi_ws.status.Status` code (see the module's docstring)."""
     iterations: int = 0
+    """Gauss-Newton (reduced) or IPOPT iterations."""
     equilibrium_solves: int = 0
     factorizations: int = 0
     fac: Factorization | None = None
+    """The last LU of K near the answer, reusable for its sensitivities."""
 
     @property
     def ok(self) -> bool:
+        """A new verified equilibrium was found (the status is not ``solve_failed``)."""
         return self.status != FAILED
 
 

@@ -383,7 +383,7 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
                 checkpoint=checkpoint if checkpoint_dir is not None else None)
         else:
             own = executor is None
-            executor = executor or ProcessExecutor(workers)
+            executor = executor or ProcessExecutor(workers, problem)
             try:
                 tips, status, residual, states, counters = _parallel(problem, us, settings, workers, bar, run,
                                                                      executor)
