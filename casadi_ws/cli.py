@@ -51,40 +51,39 @@ def cmd_equilibrium(args) -> int:
     return 0 if eq.converged else 1
 
 
-def _prepare_out(path: str, overwrite: bool, resume: bool = False) -> Path:
+def _prepare_out(path: str, overwrite: bool, resume: bool = False) -> tuple[Path, str]:
+    """The output directory and what to do there: ``new`` (start), ``resume`` (a checkpoint is there) or
+    ``done`` (``--resume`` on a finished result: nothing to compute)."""
     from .runtime.run_state import CHECKPOINT
 
     out = Path(path)
     if resume:
         if overwrite:
             raise UsageError("--resume and --overwrite contradict each other")
-        if not (out / CHECKPOINT).is_file():
-            done = (out / "summary.json").is_file()
-            raise UsageError(f"--resume: {out} has no checkpoint" + (" (the run there is complete)" if done else ""))
-        return out
+        if (out / CHECKPOINT).is_file():
+            return out, "resume"
+        if (out / "summary.json").is_file():
+            return out, "done"
+        print(f"casadi-ws: --resume: no checkpoint in {out} (the run had not written one yet): starting the run",
+              file=sys.stderr)
+        out.mkdir(parents=True, exist_ok=True)
+        return out, "new"
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise UsageError(f"--out: {out} already holds files; pass --overwrite to replace them or --resume to "
                          f"continue an interrupted run")
     if out.exists() and overwrite:
         (out / CHECKPOINT).unlink(missing_ok=True)
     out.mkdir(parents=True, exist_ok=True)
-    return out
+    return out, "new"
 
 
-# A forward-backward grid finer than this many cells over the robot's reach needs --force.
-MAX_CELLS = 200_000
-
-
-def _check_step(problem, step: float, force: bool) -> None:
-    """Refuse a grid step so small that the exploration could not finish in reasonable time."""
-    if not step > 0 or not np.isfinite(step):
-        raise UsageError(f"--step: expected a grid step > 0 in metres, got {step}")
-    # the tip stays within the robot's size of where it starts: a ball bounds the cells that can be reached
-    reach = problem.mesh.characteristic_length()
-    cells = 4.0 / 3.0 * np.pi * reach**3 / step**3
-    if cells > MAX_CELLS and not force:
-        raise UsageError(f"--step: {step} m could mean up to {cells:.3g} grid cells within the robot's reach "
-                         f"({reach:.3g} m), more than {MAX_CELLS}; use a larger step or pass --force")
+def _print_finished(out: Path) -> int:
+    s = json.loads((out / "summary.json").read_text())
+    print(f"{out}: the run is complete, nothing to resume: {s['method']}, {s['n_points']} reachable points, "
+          f"{s['n_failed']} failed, {s['time_s']:.1f} s")
+    for w in s.get("warnings", []):
+        print(f"casadi-ws: warning: {w}", file=sys.stderr)
+    return 0
 
 
 def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
@@ -123,23 +122,28 @@ def cmd_solve(args) -> int:
         if args.nd ** problem.n_u > 10**8 and not args.force:
             raise UsageError(f"--nd: {args.nd}^{problem.n_u} = {args.nd ** problem.n_u:.3g} equilibria; "
                              f"pass --force to run that many")
-        out = _prepare_out(args.out, args.overwrite, args.resume)
+        out, mode = _prepare_out(args.out, args.overwrite, args.resume)
         if args.stride is not None and args.stride < 1:
             raise UsageError(f"--stride: expected an integer >= 1, got {args.stride}")
         settings = ForwardSettings(n_d=args.nd, workers=args.workers, progress=not args.quiet,
                                    store_states=args.store_states, checkpoint_every=args.checkpoint_every,
                                    stride=args.stride)
-        run = lambda: forward(problem, settings=settings, checkpoint_dir=out, resume=args.resume)  # noqa: E731
+        run = lambda: forward(problem, settings=settings, checkpoint_dir=out, resume=mode == "resume")  # noqa: E731
     else:
         from .workspace.backward import BackwardSettings
         from .workspace.forward_backward import FBSettings, forward_backward
 
-        _check_step(problem, args.step, args.force)
-        out = _prepare_out(args.out, args.overwrite, args.resume)
+        if not args.step > 0 or not np.isfinite(args.step):
+            raise UsageError(f"--step: expected a grid step > 0 in metres, got {args.step}")
+        if args.max_cells < 1:
+            raise UsageError(f"--max-cells: expected an integer >= 1, got {args.max_cells}")
+        out, mode = _prepare_out(args.out, args.overwrite, args.resume)
         settings = FBSettings(step=args.step, strategy=args.strategy, progress=not args.quiet,
                               backward=BackwardSettings(formulation=args.backward), store_states=args.store_states,
-                              workers=args.workers)
-        run = lambda: forward_backward(problem, settings, checkpoint_dir=out, resume=args.resume)  # noqa: E731
+                              workers=args.workers, max_cells=args.max_cells)
+        run = lambda: forward_backward(problem, settings, checkpoint_dir=out, resume=mode == "resume")  # noqa: E731
+    if mode == "done":
+        return _print_finished(out)
     try:
         result = run()
     except KeyboardInterrupt:
@@ -218,7 +222,7 @@ def cmd_follow(args) -> int:
         raise UsageError(f"--targets: {path}: expected lines 'x,y,z' in metres ({exc})") from None
     if targets.ndim != 2 or targets.shape[1] != 3 or len(targets) == 0 or not np.all(np.isfinite(targets)):
         raise UsageError(f"--targets: {path}: expected one or more lines 'x,y,z' in metres")
-    out = _prepare_out(args.out, args.overwrite)
+    out, _ = _prepare_out(args.out, args.overwrite)
     res = follow(problem, targets, _reach_settings(args))
     res.save_csv(out / "follow.csv")
     rest = np.asarray(problem.end_effector, float)
@@ -239,7 +243,7 @@ def cmd_demo(args) -> int:
           f"{problem.mesh.n_tets} tetrahedra, {problem.material.model}, {problem.n_u} cables, "
           f"U = [0, 100] N x [0, 100] N, {args.nd} values per cable)")
     result = forward(problem, settings=ForwardSettings(n_d=args.nd, progress=True))
-    write_outputs(result, problem, _prepare_out(args.out, True), quiet=False)
+    write_outputs(result, problem, _prepare_out(args.out, True)[0], quiet=False)
     return 0
 
 
@@ -272,7 +276,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--resume", action="store_true", help="continue the interrupted run whose checkpoint is in --out")
     s.add_argument("--checkpoint-every", type=float, default=30.0,
                    help="forward: seconds between checkpoints (forward-backward: every iteration)")
-    s.add_argument("--force", action="store_true", help="run even a grid this large")
+    s.add_argument("--max-cells", type=int, default=200_000,
+                   help="fb: stop after the iteration in which this many grid cells were explored; the result "
+                        "keeps what was verified and --resume with a larger budget continues (200000)")
+    s.add_argument("--force", action="store_true", help="forward: run even more than 10^8 equilibria")
     s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     s.set_defaults(func=cmd_solve)
 

@@ -95,11 +95,11 @@ def test_perturbed_problem_loads_or_fails_with_the_validation_error(path, value,
         assert str(exc).startswith("<perturbed>")
 
 
-def test_grid_step_too_small_needs_force(tmp_path, capsys):
+def test_invalid_grid_step_or_budget_is_refused(tmp_path, capsys):
     path = REPO / "problems" / "trunk_2cables.yaml"
-    assert main(["solve", str(path), "--method", "fb", "--step", "1e-5", "--out", str(tmp_path / "o")]) == 2
-    assert "pass --force" in capsys.readouterr().err
-    assert main(["solve", str(path), "--method", "fb", "--step", "0", "--out", str(tmp_path / "o")]) == 2
+    for flag, value in (("--step", "0"), ("--step", "-0.004"), ("--step", "nan"), ("--max-cells", "0")):
+        assert main(["solve", str(path), "--method", "fb", flag, value, "--out", str(tmp_path / "o")]) == 2
+        assert flag in capsys.readouterr().err
 
 
 # ---------------------------------------------------------------------------------------------------- resume
@@ -147,8 +147,41 @@ def test_killed_run_resumes_to_the_same_result(tmp_path, method, args):
         for k in ("explored", "feasible", "iterations", "backward_solves"):
             assert a.counters[k] == b.counters[k], k
     assert not (out / "checkpoint.npz").exists()
+    # --resume on a finished result: its summary, nothing recomputed
     r = subprocess.run(_cli(*base, "--out", out, "--resume"), capture_output=True, text=True)
-    assert r.returncode == 2 and "complete" in r.stderr
+    assert r.returncode == 0 and "complete" in r.stdout and f"{b.n_points} reachable points" in r.stdout
+
+
+def test_resume_without_a_checkpoint_starts_the_run(tmp_path):
+    prob = _coarse_problem(tmp_path)
+    out = tmp_path / "never_checkpointed"
+    r = subprocess.run(_cli("solve", prob, "--nd", "5", "--quiet", "--out", out, "--resume"),
+                       capture_output=True, text=True)
+    assert r.returncode == 0 and "starting the run" in r.stderr, r.stderr
+    assert json.loads((out / "summary.json").read_text())["n_points"] == 25
+
+
+def test_fb_budget_stops_cleanly_and_resumes_with_a_larger_one(tmp_path):
+    prob = _coarse_problem(tmp_path)
+    base = ["solve", prob, "--method", "fb", "--step", "0.006", "--quiet"]
+    ref = subprocess.run(_cli(*base, "--out", tmp_path / "ref"), capture_output=True, text=True)
+    assert ref.returncode == 0, ref.stderr
+    out = tmp_path / "budget"
+    r = subprocess.run(_cli(*base, "--max-cells", "50", "--out", out), capture_output=True, text=True)
+    assert r.returncode == 0 and "Traceback" not in r.stderr
+    warnings = [ln for ln in r.stderr.splitlines() if "--max-cells" in ln]
+    assert len(warnings) == 1 and "budget of 50" in warnings[0]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["counters"]["stopped_at_max_cells"] and any("--max-cells" in w for w in s["warnings"])
+    assert 0 < s["n_points"] < load_result(tmp_path / "ref").n_points
+    assert (out / "checkpoint.npz").is_file()  # resumable
+    partial = load_result(out)
+    r = subprocess.run(_cli(*base, "--max-cells", "100000", "--out", out, "--resume"), capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    a, b = load_result(tmp_path / "ref"), load_result(out)
+    assert a.n_points == b.n_points and not b.counters["stopped_at_max_cells"]
+    np.testing.assert_array_equal(a.u, b.u)
+    assert {tuple(p) for p in partial.u} <= {tuple(p) for p in b.u}  # what was verified stays
 
 
 def test_ctrl_c_stops_cleanly_with_a_resumable_checkpoint(tmp_path):

@@ -64,8 +64,9 @@ class FBSettings:
     at s = 4 mm), so such a cell is not reached (0.25 and 0.1 reach the same cells on the 2-, 3- and
     4-cable trunks; BENCHMARKS.md). Recorded as ``prefiltered``. None: off (the paper's rule)."""
     max_cells: int = 200_000
-    """Stop (with a note in the counters and a warning in the summary) after the iteration in which this
-    many grid points have been explored."""
+    """Budget: stop after the iteration in which this many grid points have been explored. The result holds
+    what was verified, its summary says it stopped (``stopped_at_max_cells``), and the checkpoint stays, so
+    the run resumes with a larger budget (the budget is not part of the run's fingerprint)."""
     store_states: bool = False
     """Keep every reached point's nodal displacements."""
     workers: int = 1
@@ -326,25 +327,26 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
         t0 = time.perf_counter()
         model = model or StaticModel(problem)
         build_model = time.perf_counter() - t0
-        fp = fingerprint("forward-backward", model, asdict(settings) | {"workers": None, "progress": None})
+        # the budget is not part of the answer: a run stopped by it resumes with a larger one
+        fp = fingerprint("forward-backward", model,
+                         asdict(settings) | {"workers": None, "progress": None, "max_cells": None})
         run = RunState(checkpoint_dir, "forward-backward", fp, resume, t0)
 
-        # initial configuration: the equilibrium at u = u_min (U^(0) = U)
-        eq = solve_equilibrium(model, model.u_min.copy())
-        if eq.status != CONVERGED:
-            raise RuntimeError(f"no equilibrium at u = u_min ({eq.status_name}); cannot start")
-        grid = Grid(eq.tip, settings.step) if settings.strategy == "uniform" else None
-        A0, S0 = sensitivity(model, eq.q, tangent_factorization(model, eq.q, eq.u))
-        start = _Config(grid.index(eq.tip) if grid else (0, 0, 0), eq.tip, eq.q, eq.u.copy(), A0, S0)
-        ex = Exploration(problem, model, settings, run, start, grid)
-        ex.counters["equilibrium_solves"] += 1
-        ex.counters["factorizations"] += 1
-        if run.saved is not None:
-            ex.restore(*run.saved)
-
         own = executor is None
-        executor = executor or make_executor(settings.workers, model)
+        executor = executor or make_executor(settings.workers, model, problem)  # workers start meanwhile
         try:
+            # initial configuration: the equilibrium at u = u_min (U^(0) = U)
+            eq = solve_equilibrium(model, model.u_min.copy())
+            if eq.status != CONVERGED:
+                raise RuntimeError(f"no equilibrium at u = u_min ({eq.status_name}); cannot start")
+            grid = Grid(eq.tip, settings.step) if settings.strategy == "uniform" else None
+            A0, S0 = sensitivity(model, eq.q, tangent_factorization(model, eq.q, eq.u))
+            start = _Config(grid.index(eq.tip) if grid else (0, 0, 0), eq.tip, eq.q, eq.u.copy(), A0, S0)
+            ex = Exploration(problem, model, settings, run, start, grid)
+            ex.counters["equilibrium_solves"] += 1
+            ex.counters["factorizations"] += 1
+            if run.saved is not None:
+                ex.restore(*run.saved)
             with deferred_interrupt() as ctrl_c:  # Ctrl-C stops between solves; the last checkpoint stays
                 algorithm1(ex, executor, ctrl_c)
         finally:
@@ -355,7 +357,8 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
 
             release_solvers()
         result = ex.result(build_model)
-        run.finish()
+        if not result.counters["stopped_at_max_cells"]:
+            run.finish()  # complete: the result files replace the checkpoint, which a budget stop keeps
         return result
 
 

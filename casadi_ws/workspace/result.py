@@ -74,7 +74,9 @@ class WorkspaceResult:
             w.append(f"{failed} of {solves} solves failed ({100 * failed / solves:.0f} %, above "
                      f"{100 * FAILURE_WARNING:.0f} %): the estimate may miss parts of the workspace; see failures.csv")
         if self.counters.get("stopped_at_max_cells"):
-            w.append("the exploration stopped at max_cells: the workspace is larger than what was explored")
+            w.append(f"the exploration stopped at its budget of {self.settings.get('max_cells')} explored cells "
+                     f"(--max-cells): the result holds what was verified so far; the same command with --resume "
+                     f"and a larger --max-cells continues it")
         return w
 
     def summary(self) -> dict:
