@@ -97,7 +97,9 @@ def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
         print(f"casadi-ws: warning: {w}", file=sys.stderr)
     if not quiet:
         s = result.summary()
-        print(f"{result.method}: {s['n_points']} reachable points, {s['n_failed']} failed, {s['time_s']:.1f} s")
+        per_cell = s["counters"].get("factorizations_per_cell")
+        print(f"{result.method}: {s['n_points']} reachable points, {s['n_failed']} failed, {s['time_s']:.1f} s"
+              + (f", {per_cell:.2f} LU factorisations per reached cell" if per_cell is not None else ""))
         extra = " cells.vtu" if (out / "cells.vtu").exists() else ""
         print(f"wrote {out}/: summary.json points.csv failures.csv result.npz points.vtp{extra} (ParaView) "
               f"three_views.png workspace_3d.png")
@@ -301,7 +303,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="weight (m^2/N^2) of |u|^2 (reach) or |u - u_previous|^2 (follow)")
         r.add_argument("--max-du", type=float, default=None, help="largest change of each tension per solve (N)")
 
-    c = sub.add_parser("compare", help="agreement of two result directories (coverage, precision, Hausdorff)")
+    c = sub.add_parser("compare", help="agreement of two result directories (strict cell recall first, Hausdorff, volumes)")
     c.add_argument("a", help="result directory A (e.g. forward)")
     c.add_argument("b", help="result directory B (e.g. forward-backward)")
     c.add_argument("--step", type=float, default=None, help="grid step for the cell sets (default: B's)")

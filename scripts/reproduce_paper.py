@@ -9,7 +9,7 @@ For the 2-, 3- and 4-cable trunks of problems/:
     started cold, at random positions of the other actuators): clearly marked as an estimate. A full forward
     run at a coarser n_d is the comparison cloud;
   - forward-backward method with the default settings;
-  - agreement (coverage, precision, Hausdorff, volumes), three views like Figs. 11-13, Fig. 14 (operations
+  - agreement (strict cell recall first, then the lenient within-one-cell measures, Hausdorff, volumes), three views like Figs. 11-13, Fig. 14 (operations
     and time vs n_u, log scale), Table 1 side by side with the publication's, and report.md.
 The qualitative claims are tested by the data and the report states where they hold and where not.
 ``--quick`` uses a coarser mesh, grids and steps (a few minutes); one test runs it.
@@ -83,7 +83,7 @@ def main():
     n_full = 11 if q else 100  # forward n_d of the publication (2 cables in full)
     coarse = {2: 11 if q else 100, 3: 5 if q else 15, 4: 4 if q else 8}
     lines = 2 if q else 10
-    step = 0.01 if q else 0.004
+    step = 0.008 if q else 0.004
 
     rows, agreement = [], {}
     t_start = time.perf_counter()
@@ -196,10 +196,12 @@ def write_report(out, rows, agreement, args, total, step, n_full):
           "with n_u here too (a 2-cable workspace is a surface, a 3- or 4-cable one a volume), so the "
           "growth is not flat as Fig. 14 suggests but far below the forward method's.")
     for n, a in agreement.items():
-        claim(f"{n} cables: the two workspaces coincide", a["coverage"] >= 0.95,
-              f"{n} cables, the two workspaces coincide: coverage {a['coverage']:.3f}, precision "
-              f"{a['precision']:.3f}, Hausdorff {a['hausdorff'] * 1e3:.2f} mm: {{verdict}}"
-              + ("." if a["coverage"] >= 0.95 else " (coverage below 0.95)."))
+        ok = a["cells_a_in_b"] >= 0.98
+        claim(f"{n} cables: the two workspaces coincide", ok,
+              f"{n} cables, the two workspaces coincide: forward-backward reports {a['cells_both']} of the "
+              f"{a['cells_a']} grid cells the forward cloud occupies (strict recall {a['cells_a_in_b']:.3f}), "
+              f"{100 * a['points_a_in_b_cells']:.1f} % of the forward points lie in its cells, Hausdorff "
+              f"{a['hausdorff'] * 1e3:.2f} mm: {{verdict}}" + ("." if ok else " (recall below 0.98)."))
     (out / "claims.json").write_text(json.dumps(claims, indent=2) + "\n")
     nodes = load(2, args.quick).mesh
     text = f"""# Reproduction of the publication's Section 6 {'(quick mode)' if args.quick else ''}
@@ -230,14 +232,21 @@ The grid step of the publication is not given, so the counts compare in kind, no
 
 ## Agreement (forward cloud vs forward-backward cells)
 
-| n_u | forward cloud (n_d, points) | coverage | precision | Hausdorff (mm) | volume forward (cm^3) | volume FB (cm^3) |
-|---|---|---|---|---|---|---|
-""" + "\n".join(f"| {n} | {r['fw_cloud_nd']}, {r['fw_cloud_points']} | {a['coverage']:.3f} | {a['precision']:.3f} | "
+Strict measures on the forward-backward grid first (`casadi_ws.compare`): the share of the cells the forward
+cloud occupies that forward-backward reports (recall), the share of forward points lying in reported cells,
+and the share of reported cells holding a forward point; then the lenient ones, labelled.
+
+| n_u | forward cloud (n_d, points) | forward cells | FB cells | recall (strict) | forward points in FB cells | FB cells with a forward point | coverage within one cell | precision within one cell | Hausdorff (mm) | volume forward (cm^3) | volume FB (cm^3) |
+|---|---|---|---|---|---|---|---|---|---|---|---|
+""" + "\n".join(f"| {n} | {r['fw_cloud_nd']}, {r['fw_cloud_points']} | {a['cells_a']} | {a['cells_b']} | "
+                 f"{a['cells_a_in_b']:.3f} | {a['points_a_in_b_cells']:.3f} | {a['cells_b_in_a']:.3f} | "
+                 f"{a['coverage_within_one_cell']:.3f} | {a['precision_within_one_cell']:.3f} | "
                  f"{a['hausdorff'] * 1e3:.2f} | {a['volume_a'] * 1e6:.3f} | {a['volume_b'] * 1e6:.3f} |"
                  for (n, a), r in zip(agreement.items(), rows)) + """
 
 Volumes count occupied grid cells (one cell thick for the 2-cable surface). A forward cloud coarser than the
-grid leaves cells between its points empty, so its volume and the precision understate the agreement.
+grid leaves cells between its points empty, so its volume and the share of FB cells holding a forward point
+understate the agreement; the recall does not depend on that.
 
 ## Figures
 

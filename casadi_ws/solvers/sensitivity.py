@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["bounded_step", "sensitivity"]
+__all__ = ["bounded_step", "closest_to_box", "sensitivity"]
 
 
 def sensitivity(model, q, fac) -> tuple[np.ndarray, np.ndarray]:
@@ -57,3 +57,18 @@ def bounded_step(A: np.ndarray, r: np.ndarray, lo: np.ndarray, hi: np.ndarray) -
             return x
         free[k] = True
     return x
+
+
+def closest_to_box(A: np.ndarray, r: np.ndarray, lo: np.ndarray, hi: np.ndarray, half_width: float):
+    """du (lo <= du <= hi) bringing A du as near as possible to the box r +- half_width (a grid cell around
+    r), with the distance left: min |A du - (r + w)| over du and |w_i| <= half_width, a bounded linear
+    least-squares problem in (du, w). Where A du can enter the box the minimiser is not unique: the
+    least-norm one is the smallest input change that does. Returns ``(du, gap)``, gap the infinity-norm
+    distance from A du to the box (0 inside it)."""
+    A = np.asarray(A, dtype=float)
+    n = A.shape[1]
+    h = np.full(3, float(half_width))
+    x = bounded_step(np.hstack([A, -np.eye(3)]), r, np.concatenate([lo, -h]), np.concatenate([hi, h]))
+    du = x[:n]
+    gap = max(0.0, float(np.abs(A @ du - r).max()) - half_width)
+    return du, gap

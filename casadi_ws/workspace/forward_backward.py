@@ -36,7 +36,7 @@ from ..fem.model import StaticModel
 from ..runtime.executor import Executor, deferred_interrupt, make_executor, one_blas_thread
 from ..runtime.run_state import RunState, fingerprint
 from ..solvers.equilibrium import CONVERGED, solve_equilibrium, tangent_factorization
-from ..solvers.sensitivity import bounded_step, sensitivity
+from ..solvers.sensitivity import bounded_step, closest_to_box, sensitivity
 from ..status import Status
 from .backward import BackwardSettings, backward
 from .interval import Grid, interval_box, neighbourhood
@@ -58,11 +58,18 @@ class FBSettings:
     backward: BackwardSettings = field(default_factory=BackwardSettings)
     """How the backward problem (8) is solved."""
     prefilter: float | None = 0.1
-    """Skip a target when the linearised closest point (bounded least squares with Step 1's A) lies more
-    than (0.5 + prefilter) steps from it in some coordinate, i.e. a tenth of a cell outside the target's
-    cell by default. Over a one-cell move the linearisation errs by ~s^2 x curvature (~0.04 s on the trunk
-    at s = 4 mm), so such a cell is not reached (0.25 and 0.1 reach the same cells on the 2-, 3- and
-    4-cable trunks; BENCHMARKS.md). Recorded as ``prefiltered``. None: off (the paper's rule)."""
+    """Skip a target when the linearised reachable set (Step 1's A over the remaining inputs) misses its cell
+    by more than ``prefilter`` steps in some coordinate (infinity-norm distance from the linearised closest
+    point to the cell's box). Over a one-cell move the linearisation errs by ~s^2 x curvature (~0.04 s on
+    the trunk at s = 4 mm). Measured (docs/methods.md): on the 2-cable trunk 0.1, 0.05 and 0.02 reach the
+    same cells and 0 loses 12 % of them, along the edges; on a linear-material trunk at s = 1.5 mm, 0.05
+    already loses 6 % (its cables' geometric stiffness bends the workspace more per cell). Recorded as
+    ``prefiltered``. None: off (the paper's rule)."""
+    cells_meeting_box: bool = True
+    """Step 2 keeps the neighbours whose *cell* meets the Step-1 box (the box grown by half a step), not
+    only those whose centre lies in it as (7) states: a cell is reached by any point in it, and along the
+    workspace's edges the box often covers part of a cell but not its centre. The prefilter then drops the
+    cells the linearised reachable set misses."""
     max_cells: int = 200_000
     """Budget: stop after the iteration in which this many grid points have been explored. The result holds
     what was verified, its summary says it stopped (``stopped_at_max_cells``), and the checkpoint stays, so
@@ -141,13 +148,14 @@ class Exploration:
         self.problem, self.model, self.settings, self.run, self.grid = problem, model, settings, run, grid
         self.uniform = grid is not None
         self.counters = dict(iterations=0, explored=0, feasible=0, backward_solves=0, equilibrium_solves=0,
-                             factorizations=0, not_reached=0, prefiltered=0, backward_failed=0,
+                             factorizations=0, not_reached=0, prefiltered=0, backward_failed=0, adopted=0,
                              stopped_at_max_cells=False)
         self.timings = {"step1_interval": 0.0, "step2_neighbourhood": 0.0, "step3_backward": 0.0}
         self.bsettings = settings.backward
         if self.bsettings.give_up is None and self.bsettings.formulation == "reduced":
             self.bsettings = replace(self.bsettings, give_up=0.05)  # see BackwardSettings.give_up
         self.reached = [start]
+        self.reached_cells = {start.cell}
         self.visited = {start.cell}
         self.visited_pts = [start.p]
         self.failed_targets, self.failed_status = [], []
@@ -168,7 +176,10 @@ class Exploration:
         """(cell, target) of the grid points of S_eta(cfg) inside the box."""
         t = time.perf_counter()
         centre = self.grid.centre(cfg.cell) if self.uniform else cfg.p
-        targets, offsets = neighbourhood(centre, self.eta(cfg), lower, upper)
+        eta = self.eta(cfg)
+        if self.settings.cells_meeting_box:
+            lower, upper = lower - 0.5 * eta, upper + 0.5 * eta
+        targets, offsets = neighbourhood(centre, eta, lower, upper)
         cells = [tuple(np.asarray(cfg.cell) + off) if self.uniform else (0, 0, 0) for off in offsets]
         self.timings["step2_neighbourhood"] += time.perf_counter() - t
         return list(zip(cells, targets))
@@ -188,14 +199,21 @@ class Exploration:
                     continue
                 self.visited_pts.append(target)
             self.counters["explored"] += 1
-            if self.settings.prefilter is not None:
-                gap = np.abs(_linear_closest(cfg.A, cfg.p, cfg.u, self.model, target) - target).max()
-                if gap > (0.5 + self.settings.prefilter) * eta:
-                    self._fail(target, Status.PREFILTERED)
-                    continue
+            if self.settings.prefilter is not None and self._linear_gap(cfg, target, eta) > self.settings.prefilter * eta:
+                self._fail(target, Status.PREFILTERED)
+                continue
             todo.append((cell, target))
         self.timings["step2_neighbourhood"] += time.perf_counter() - t
         return todo
+
+    def _linear_gap(self, cfg, target, eta) -> float:
+        """Infinity-norm distance from the target's cell to the linearised reachable set at cfg."""
+        m = self.model
+        lo, hi = m.u_min - cfg.u, m.u_max - cfg.u
+        gap = np.abs(cfg.p + cfg.A @ bounded_step(cfg.A, target - cfg.p, lo, hi) - target).max() - 0.5 * eta
+        if gap > 0 and self.bsettings.edge_box is not None:  # the centre is out of reach: any point of the cell?
+            gap = min(gap, closest_to_box(cfg.A, target - cfg.p, lo, hi, 0.5 * eta)[1])
+        return gap
 
     def backward(self, tasks, executor: Executor, ctrl_c) -> list:
         """Step 3: the backward solves of every task, warm-started from its configuration, in task order."""
@@ -217,7 +235,9 @@ class Exploration:
         return answers
 
     def update(self, tasks, answers) -> list:
-        """Step 4: a target is reached when its verified answer lies in its cell; returns the new frontier."""
+        """Step 4: returns the new frontier. A cell is reached when a verified answer lies in it, whichever
+        target that solve aimed at: an answer that misses its target's cell but lands in a cell not reached
+        yet is adopted there (uniform grid), so no verified equilibrium is thrown away."""
         new_frontier = []
         for (cfg, todo), out in zip(tasks, answers):
             eta = self.eta(cfg)
@@ -225,12 +245,22 @@ class Exploration:
                 self.counters["backward_solves"] += 1
                 self.counters["equilibrium_solves"] += n_eq
                 self.counters["factorizations"] += n_fac
-                if ok and np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9)):
+                hit = ok and np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9))
+                if not hit:
+                    self._fail(target, Status(status) if not ok else Status.NOT_REACHED)
+                    if ok and self.uniform:
+                        cell = self.grid.index(tip)
+                        hit = self.grid.contains(cell, tip)
+                if hit and not (self.uniform and cell in self.reached_cells):
+                    if cell not in self.visited:  # adopted: explored by the answer that landed in it
+                        self.visited.add(cell)
+                        self.counters["explored"] += 1
+                    if not np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9)):
+                        self.counters["adopted"] += 1
                     new = _Config(cell, tip, q, u, A, S)
                     new_frontier.append(new)
                     self.reached.append(new)
-                else:
-                    self._fail(target, Status(status) if not ok else Status.NOT_REACHED)
+                    self.reached_cells.add(cell)
             cfg.S = None  # expanded: no longer needed
         return new_frontier
 
@@ -284,6 +314,7 @@ class Exploration:
                                         a["frontier_q"][k] if f else (a["q"][i] if "q" in a else None), a["u"][i],
                                         a["frontier_A"][k] if f else None, a["frontier_S"][k] if f else None))
         self.frontier = [self.reached[i] for i in sorted(fset)]
+        self.reached_cells = {c.cell for c in self.reached}
         self.visited = {tuple(int(c) for c in v) for v in a["visited"]}
         self.visited_pts = list(a["visited_pts"])
         self.failed_targets, self.failed_status = list(a["failed_targets"]), list(a["failed_status"])
@@ -291,9 +322,15 @@ class Exploration:
     def result(self, build_model: float) -> WorkspaceResult:
         self.counters["stopped_at_max_cells"] = bool(self.frontier)
         self.counters["feasible"] = len(self.reached)
+        self.counters["factorizations_per_cell"] = self.counters["factorizations"] / len(self.reached)
         timings = {"build_model": build_model, **self.timings, "total": self.run.elapsed(),
                    "before_resume": self.run.previous}
         reached, settings = self.reached, self.settings
+        failed_targets, failed_status = self.failed_targets, self.failed_status
+        if self.uniform:  # a target missed by one solve whose cell another answer landed in is reached
+            keep = [self.grid.index(tg) not in self.reached_cells for tg in failed_targets]
+            failed_targets = [tg for tg, k in zip(failed_targets, keep) if k]
+            failed_status = [s for s, k in zip(failed_status, keep) if k]
         arrays = {"cell_step": np.array(settings.step if self.uniform else np.nan)}
         if self.uniform:
             arrays["cells"] = np.array([c.cell for c in reached], dtype=np.int64)
@@ -301,9 +338,8 @@ class Exploration:
             arrays["grid_origin"] = self.grid.origin
         return WorkspaceResult(
             method="forward-backward", points=np.array([c.p for c in reached]), u=np.array([c.u for c in reached]),
-            failed_u=np.array(self.failed_targets).reshape(-1, 3),
-            failed_status=np.array(self.failed_status, dtype=int),
-            failed_residual=np.full(len(self.failed_status), np.nan),
+            failed_u=np.array(failed_targets).reshape(-1, 3), failed_status=np.array(failed_status, dtype=int),
+            failed_residual=np.full(len(failed_status), np.nan),
             states=np.array([c.q for c in reached]) if settings.store_states else None,
             counters=self.counters, timings=timings, settings=asdict(settings),
             problem=describe(self.problem, self.model), rest_tip=self.model.p0, arrays=arrays)
