@@ -19,7 +19,7 @@ from benchlib import machine, write_section
 
 ROOT = Path(__file__).resolve().parents[1]
 ND = {2: 100, 3: 30, 4: 12}
-DEFAULT = ["trunk_2cables", "trunk_3cables", "trunk_4cables", "sofa_trunk_2cables", "sofa_trunk_3cables"]
+DEFAULT = ["trunk_2cables", "trunk_3cables", "trunk_4cables", "sofa_trunk_2cables"]
 
 
 def forward_cloud(name, problem, n_d, workers):
