@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from casadi_ws import Cable, Material, Problem, box_mesh, trunk_cable, trunk_mesh
+from casadi_ws.fem.mesh import quadratic
 from casadi_ws.io.problem import nodes_in_box, nodes_on_plane
 
 # compiled element kernels are cached per machine; keep the tests' cache out of the user's home if asked
@@ -20,10 +21,13 @@ SOFA_TRUNK = REPO / "problems" / "meshes" / "trunk.vtk"
 MESHES = REPO / "tests" / "meshes"
 
 
-def cantilever(n=2, slender=10, model="linear", nu=0.3, E=1e6, L=0.2, cable_offset=None, loads=()):
-    """A square beam along +z clamped at z = 0, n elements across, cubic elements."""
+def cantilever(n=2, slender=10, model="linear", nu=0.3, E=1e6, L=0.2, cable_offset=None, loads=(), order=1):
+    """A square beam along +z clamped at z = 0, n elements across, cubic elements (order 2: 10-node
+    tetrahedra)."""
     h = L / slender
     mesh = box_mesh((h, h, L), (n, n, slender * n), (-h / 2, -h / 2, 0.0))
+    if order == 2:
+        mesh = quadratic(mesh)
     cables = []
     if cable_offset is not None:
         zs = np.linspace(L / (slender * n), L, slender * n)

@@ -95,3 +95,82 @@ def test_sofa_finger_and_diamond_load_and_solve():
                  cables, np.array([0.0, -0.06, 0.0]))
     eq = solve_equilibrium(StaticModel(pb), [1.0, 1.0, 0.0])
     assert eq.converged and eq.tip[1] < -0.06
+
+
+def test_tet10_shape_functions_and_quadratic_meshes():
+    from casadi_ws.fem.elements import TET10
+    from casadi_ws.fem.mesh import quadratic
+
+    N = TET10.shape(TET10.ref_nodes)
+    np.testing.assert_allclose(N, np.eye(10), atol=1e-14)  # Kronecker delta at the nodes
+    xi = np.random.default_rng(0).dirichlet(np.ones(4), size=20)[:, 1:]
+    np.testing.assert_allclose(TET10.shape(xi).sum(axis=1), 1.0)
+    h = 1e-6
+    for j in range(3):  # gradients against central differences
+        e = np.zeros(3)
+        e[j] = h
+        fd = (TET10.shape(xi + e) - TET10.shape(xi - e)) / (2 * h)
+        np.testing.assert_allclose(TET10.shape_gradients(xi)[:, :, j], fd, atol=1e-8)
+    m1 = box_mesh((0.02, 0.03, 0.1), (2, 2, 5))
+    m2 = quadratic(m1)
+    assert m2.tets.shape == (m1.n_tets, 10) and m2.element is TET10
+    np.testing.assert_allclose(m2.nodes[m2.tets[:, 4]], 0.5 * (m2.nodes[m2.tets[:, 0]] + m2.nodes[m2.tets[:, 1]]))
+    w, _ = TET10.rest_geometry(m2.nodes[m2.tets])
+    np.testing.assert_allclose(w.sum(), 0.02 * 0.03 * 0.1, rtol=1e-12)
+    loads = TET10.body_load_weights(m2.nodes[m2.tets])  # consistent: corners -V/20, mid-edges V/5
+    V = m1.volumes()[:, None]
+    np.testing.assert_allclose(loads[:, :4], np.broadcast_to(-V / 20, (len(V), 4)), rtol=1e-10)
+    np.testing.assert_allclose(loads[:, 4:], np.broadcast_to(V / 5, (len(V), 6)), rtol=1e-10)
+    # a point embedded in a quadratic mesh moves with an affine field exactly
+    p = np.array([[0.011, 0.017, 0.063]])
+    W = embed(m2, p).matrix(m2)
+    F = np.array([[1.1, 0.2, 0.0], [0.0, 0.9, 0.1], [0.05, 0.0, 1.2]])
+    np.testing.assert_allclose(W @ (m2.nodes @ F.T).ravel(), (p @ F.T).ravel(), atol=1e-14)
+
+
+def test_tet10_files_are_read_and_folded_or_mixed_cells_are_refused(tmp_path):
+    from casadi_ws.fem.mesh import quadratic
+
+    m2 = quadratic(box_mesh((1.0, 1.0, 1.0), (2, 2, 2)))
+    meshio.write(tmp_path / "q.vtu", meshio.Mesh(m2.nodes, [("tetra10", m2.tets)]))
+    back = load_mesh(tmp_path / "q.vtu")
+    assert back.element.name == "tet10" and back.n_tets == m2.n_tets
+    nodes = m2.nodes.copy()
+    nodes[m2.tets[5, 4]] = m2.nodes[m2.tets[5, 0]] + 0.95 * (m2.nodes[m2.tets[5, 1]] - m2.nodes[m2.tets[5, 0]])
+    meshio.write(tmp_path / "folded.vtu", meshio.Mesh(nodes, [("tetra10", m2.tets)]))
+    with pytest.raises(MeshError, match=r"tetrahedron \d+ .* folded"):
+        load_mesh(tmp_path / "folded.vtu")
+    meshio.write(tmp_path / "mixed.vtu", meshio.Mesh(m2.nodes, [("tetra10", m2.tets[:3]), ("tetra", m2.tets[3:, :4])]))
+    with pytest.raises(MeshError, match="mixes"):
+        load_mesh(tmp_path / "mixed.vtu")
+
+
+def test_order_2_in_problem_files_and_every_method_runs_on_it(tmp_path):
+    import yaml
+
+    from casadi_ws import FBSettings, ForwardSettings, ProblemError, forward, forward_backward, problem_from_dict
+    from casadi_ws.control import reach
+
+    d = yaml.safe_load((MESHES.parents[1] / "problems" / "trunk_2cables.yaml").read_text())
+    d["mesh"].update(resolution=0.25, order=2)
+    pb = problem_from_dict(d, "order2.yaml")
+    assert pb.mesh.element.name == "tet10" and pb.mesh.tets.shape[1] == 10
+    fixed_z = pb.mesh.nodes[pb.fixed_nodes, 2]
+    assert fixed_z.max() <= 0.02 and np.any(np.isin(pb.fixed_nodes, pb.mesh.tets[:, 4:]))  # mid-edge nodes too
+    m = StaticModel(pb)
+    eq = solve_equilibrium(m, [40.0, 20.0])
+    assert eq.converged and eq.tip[0] > 0.005
+    fw = forward(pb, settings=ForwardSettings(n_d=3, progress=False), model=m)
+    assert fw.n_points == 9
+    fb = forward_backward(pb, FBSettings(step=0.02, progress=False), model=m)
+    assert fb.n_points >= 3
+    # reach (IPOPT) on a linear material: the corotational 10-node element's Hessian kernel is large (open)
+    d["material"]["model"] = "linear"
+    lin = StaticModel(problem_from_dict(d, "order2_linear.yaml"))
+    target = solve_equilibrium(lin, [40.0, 20.0]).tip
+    r = reach(lin, target)
+    assert r.reachable and np.allclose(r.u, [40.0, 20.0], atol=1e-3)
+    for bad in (3, 0, "two", True):
+        d["mesh"]["order"] = bad
+        with pytest.raises(ProblemError, match="mesh.order"):
+            problem_from_dict(d, "order.yaml")

@@ -8,13 +8,24 @@ from conftest import small_trunk
 from casadi_ws import Material, Problem, StaticModel, box_mesh
 from casadi_ws.fem.kernels import ElementBatch, have_compiler
 from casadi_ws.fem.materials import MATERIAL_MODELS, element_functions, rest_geometry
+from casadi_ws.fem.mesh import quadratic
+from casadi_ws.io.problem import nodes_in_box
 
 MODELS = list(MATERIAL_MODELS)
 
 
+def _quadratic_trunk(model):
+    """The coarse trunk with 10-node tetrahedra (resolution 0.25: 2 elements across)."""
+    pb = small_trunk(model, resolution=0.25)
+    pb.mesh = quadratic(pb.mesh)
+    pb.fixed_nodes = nodes_in_box(pb.mesh, [-1, -1, -1], [1, 1, 0.02])
+    return pb
+
+
+@pytest.mark.parametrize("order", [1, 2])
 @pytest.mark.parametrize("model", MODELS)
-def test_tangent_matches_central_differences(model, rng):
-    m = StaticModel(small_trunk(model))
+def test_tangent_matches_central_differences(model, order, rng):
+    m = StaticModel(small_trunk(model) if order == 1 else _quadratic_trunk(model))
     q = m.full(rng.normal(size=m.n_free) * 2e-4)
     u = np.array([30.0, 55.0])
     R, K, dRdu = m.residual_and_tangent(q, u)
@@ -55,17 +66,20 @@ def test_compiled_and_interpreted_kernels_agree(model, rng):
     np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max())
 
 
-def _patch_problem(model):
-    mesh = box_mesh((1.0, 1.0, 1.0), (3, 3, 3))
+def _patch_problem(model, order=1):
+    mesh = box_mesh((1.0, 1.0, 1.0), (3, 3, 3) if order == 1 else (2, 2, 2))
+    if order == 2:
+        mesh = quadratic(mesh)
     x = mesh.nodes
     boundary = np.flatnonzero(np.any((x < 1e-9) | (x > 1 - 1e-9), axis=1))
     return Problem(mesh, Material(model, 1e3, 0.3), boundary, [], np.array([0.5, 0.5, 0.5]))
 
 
+@pytest.mark.parametrize("order", [1, 2])
 @pytest.mark.parametrize("model,size", [("linear", 1e-3), ("corotational", 1e-3), ("neohookean", 0.15)])
-def test_patch_homogeneous_deformation_is_exact(model, size, rng):
+def test_patch_homogeneous_deformation_is_exact(model, size, order, rng):
     """Boundary nodes moved by x -> F X + c; Newton on the interior must give the same affine field."""
-    m = StaticModel(_patch_problem(model))
+    m = StaticModel(_patch_problem(model, order))
     F = np.eye(3) + size * rng.normal(size=(3, 3))
     X = m.mesh.nodes
     q_exact = (X @ F.T + np.array([0.01, -0.02, 0.03]) - X).ravel()
@@ -78,7 +92,11 @@ def test_patch_homogeneous_deformation_is_exact(model, size, rng):
             if np.linalg.norm(R) < 1e-10 * m.problem.material.young_modulus:
                 break
             q[m.free] -= sla.spsolve(m.element_stiffness(q).tocsc(), R)
-    np.testing.assert_allclose(q[m.free], q_exact[m.free], atol=1e-9)
+    # corotational 10-node elements take their rotation from the corner edges (docs/methods.md): not the
+    # polar rotation, so neighbouring elements disagree by O(strain^2) and so does the field (measured
+    # 9.5e-7 at size 1e-3, 9.5e-9 at 1e-4); the 4-node mesh is exact
+    atol = 2 * size**2 if (model == "corotational" and order == 2) else 1e-9
+    np.testing.assert_allclose(q[m.free], q_exact[m.free], atol=atol)
 
 
 @pytest.mark.parametrize("model", ["corotational", "neohookean"])

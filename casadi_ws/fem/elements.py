@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ELEMENT_TYPES", "ElementType", "TET4", "element_type"]
+__all__ = ["ELEMENT_TYPES", "ElementType", "TET10", "TET4", "TET10_EDGES", "element_type"]
 
 
 @dataclass(frozen=True)
@@ -55,15 +55,21 @@ class ElementType:
         if self.order == 1:
             # written out so a point's weights are exactly 1 - sum and its coordinates
             return np.column_stack([1.0 - xi.sum(axis=1), xi])
-        raise NotImplementedError(self.name)
+        L = np.column_stack([1.0 - xi.sum(axis=1), xi])  # barycentric coordinates of the corners
+        corners = L * (2.0 * L - 1.0)
+        edges = np.column_stack([4.0 * L[:, i] * L[:, j] for i, j in TET10_EDGES])
+        return np.hstack([corners, edges])
 
     def shape_gradients(self, xi: np.ndarray) -> np.ndarray:
         """dN_a/dxi, (k, n_nodes, 3)."""
         xi = np.atleast_2d(np.asarray(xi, dtype=float))
+        dL = np.vstack([-np.ones(3), np.eye(3)])  # dL_i/dxi (4, 3)
         if self.order == 1:
-            g = np.vstack([-np.ones(3), np.eye(3)])
-            return np.broadcast_to(g, (xi.shape[0], 4, 3)).copy()
-        raise NotImplementedError(self.name)
+            return np.broadcast_to(dL, (xi.shape[0], 4, 3)).copy()
+        L = np.column_stack([1.0 - xi.sum(axis=1), xi])
+        corners = (4.0 * L - 1.0)[:, :, None] * dL[None]
+        edges = np.stack([4.0 * (L[:, i, None] * dL[j] + L[:, j, None] * dL[i]) for i, j in TET10_EDGES], axis=1)
+        return np.concatenate([corners, edges], axis=1)
 
     def rest_geometry(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Quadrature weights in m^3 (m, n_qp) and shape-function gradients dN_a/dX at the quadrature
@@ -102,7 +108,18 @@ class ElementType:
 TET4 = ElementType("tet4", "tetra", 1, np.vstack([np.zeros(3), np.eye(3)]), np.full((1, 3), 0.25), np.ones(1))
 """The linear (4-node) tetrahedron with its one-point rule (exact for constant strain)."""
 
-ELEMENT_TYPES = {TET4.name: TET4}
+TET10_EDGES = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
+"""Corner pairs of the mid-edge nodes 4..9 of a 10-node tetrahedron, in VTK's (and meshio's) order."""
+
+_CORNERS = np.vstack([np.zeros(3), np.eye(3)])
+_A, _B = 0.5854101966249685, 0.1381966011250105  # the 4-point rule, exact for quadratic integrands
+TET10 = ElementType("tet10", "tetra10", 2,
+                    np.vstack([_CORNERS] + [(_CORNERS[i] + _CORNERS[j]) / 2 for i, j in TET10_EDGES]),
+                    np.array([[_B, _B, _B], [_A, _B, _B], [_B, _A, _B], [_B, _B, _A]]), np.full(4, 0.25))
+"""The quadratic (10-node) tetrahedron with the 4-point rule: its linear-elastic stiffness (a quadratic
+integrand on straight-sided elements) is exact; the nonlinear laws are integrated to second order."""
+
+ELEMENT_TYPES = {TET4.name: TET4, TET10.name: TET10}
 
 
 def element_type(name: str) -> ElementType:

@@ -16,10 +16,11 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from .elements import TET4, ElementType
+from .elements import TET4, TET10, TET10_EDGES, ElementType
 
 __all__ = [
     "Mesh",
+    "quadratic",
     "MeshError",
     "box_mesh",
     "embed",
@@ -82,6 +83,18 @@ class Mesh:
             e = bad[0]
             raise MeshError(f"{self.source}: tetrahedron {idx[e]} (nodes {self.tets[e].tolist()}) is inverted "
                             f"(negative volume {V[e]:.3g}); {bad.size} such element(s)")
+        if self.element.order > 1:
+            # curved elements are fine, folded ones are not: the map must keep its orientation everywhere
+            el = self.element
+            xi = np.vstack([el.ref_nodes, el.quad_points])
+            J = np.einsum("mai,kaj->mkij", self.nodes[self.tets], el.shape_gradients(xi))
+            ratio = np.linalg.det(J).min(axis=1) / (6.0 * V)
+            bad = np.flatnonzero(ratio <= 0.05)
+            if bad.size:
+                e = bad[0]
+                raise MeshError(f"{self.source}: tetrahedron {idx[e]} (nodes {self.tets[e].tolist()}) is folded: "
+                                f"its mid-edge nodes lie far from the edges' midpoints (Jacobian down to "
+                                f"{ratio[e]:.2g} of the straight element's); {bad.size} such element(s)")
 
     def characteristic_length(self) -> float:
         return float(np.linalg.norm(self.nodes.max(0) - self.nodes.min(0)))
@@ -103,18 +116,38 @@ def load_mesh(path: str | Path, scale: float = 1.0) -> Mesh:
         text = chatter.getvalue().strip() if isinstance(exc, SystemExit) else str(exc).strip()
         reason = text.splitlines()[-1] if text else type(exc).__name__
         raise MeshError(f"{path}: could not be read as a mesh ({reason})") from None
-    blocks = [c.data for c in m.cells if c.type == "tetra"]
-    if not blocks:
+    linear = [c.data for c in m.cells if c.type == "tetra"]
+    quad = [c.data for c in m.cells if c.type == "tetra10"]
+    if not linear and not quad:
         kinds = sorted({c.type for c in m.cells})
         raise MeshError(f"{path}: contains no linear tetrahedra (cell types: {', '.join(kinds) or 'none'})")
-    tets = np.concatenate(blocks).astype(np.int64)
+    if linear and quad:
+        raise MeshError(f"{path}: mixes {sum(map(len, linear))} linear (tetra) and {sum(map(len, quad))} quadratic "
+                        f"(tetra10) tetrahedra; use one kind")
+    element = TET10 if quad else TET4
+    tets = np.concatenate(quad or linear).astype(np.int64)
     used, inverse = np.unique(tets, return_inverse=True)
     nodes = np.asarray(m.points, dtype=float)[used, :3] * float(scale)
     if not np.all(np.isfinite(nodes)):
         raise MeshError(f"{path}: node coordinates contain NaN or infinite values")
-    mesh = Mesh(nodes, inverse.reshape(tets.shape), str(path), np.arange(tets.shape[0]))
+    mesh = Mesh(nodes, inverse.reshape(tets.shape), str(path), np.arange(tets.shape[0]), element)
     mesh.check()
     return mesh
+
+
+def quadratic(mesh: Mesh) -> Mesh:
+    """The same mesh with 10-node tetrahedra: a node added at the midpoint of every edge (straight edges).
+    The corner nodes keep their indices; the mid-edge nodes follow them."""
+    if mesh.element is TET10:
+        return mesh
+    corners = mesh.tets[:, :4]
+    pairs = np.stack([np.sort(corners[:, [i, j]], axis=1) for i, j in TET10_EDGES], axis=1)  # (m, 6, 2)
+    edges, inverse = np.unique(pairs.reshape(-1, 2), axis=0, return_inverse=True)
+    mid = 0.5 * (mesh.nodes[edges[:, 0]] + mesh.nodes[edges[:, 1]])
+    tets = np.hstack([corners, mesh.n_nodes + inverse.reshape(-1, 6)])
+    out = Mesh(np.vstack([mesh.nodes, mid]), tets, mesh.source, mesh.file_tet_index, TET10)
+    out.check()
+    return out
 
 
 def _hex_grid_to_tets(shape: tuple[int, int, int]) -> np.ndarray:

@@ -63,7 +63,7 @@ class StaticModel:
         self._Xe = (Xe - Xe[:, :1]).reshape(-1, nd)  # element-local: see materials' note on round-off
         self._Ge = G.reshape(G.shape[0], -1)
         self._Pe = np.column_stack([w, np.full(w.shape[0], mu), np.full(w.shape[0], lam)])
-        funs = element_functions(mat.model, element)
+        funs = element_functions(mat.model, element, hessian=False)
         self.element_functions = funs
         self._force = ElementBatch(funs["force"], backend)
         self._stiff = ElementBatch(funs["stiffness"], backend)
@@ -181,6 +181,12 @@ class StaticModel:
         ccount = np.bincount(ukey // self.n_free, minlength=self.n_free)
         self._k_indptr = np.concatenate([[0], np.cumsum(ccount)]).astype(np.int32)
         self._k_nnz = ukey.size
+
+    def hessian_vector_function(self):
+        """The element function of d(K_e^T lam_e)/du_e (for the NLPs' Hessians), built on first use."""
+        if "hessian_vector" not in self.element_functions:
+            self.element_functions.update(element_functions(self.problem.material.model, self.element))
+        return self.element_functions["hessian_vector"]
 
     def _element_inputs(self, q: np.ndarray):
         return q[self._edofs], self._Xe, self._Ge, self._Pe

@@ -19,7 +19,7 @@ import numpy as np
 from ..actuation.base import Actuator
 from ..actuation.cable import Cable, trunk_cable
 from ..fem.materials import MATERIAL_MODELS, Material
-from ..fem.mesh import Mesh, MeshError, box_mesh, embed, load_mesh, trunk_mesh
+from ..fem.mesh import Mesh, MeshError, box_mesh, embed, load_mesh, quadratic, trunk_mesh
 
 __all__ = [
     "Problem",
@@ -113,8 +113,9 @@ def nodes_on_plane(mesh: Mesh, point, normal, tolerance: float = 1e-9) -> np.nda
 
 _TOP_KEYS = {"name", "description", "mesh", "material", "gravity", "fixed", "cables", "end_effector",
              "loads", "solver", "workspace"}
-_MESH_GEN = {"generate", "length", "radius_base", "radius_tip", "resolution", "size", "divisions", "origin"}
-_MESH_FILE = {"file", "scale", "units"}
+_MESH_GEN = {"generate", "length", "radius_base", "radius_tip", "resolution", "size", "divisions", "origin",
+             "order"}
+_MESH_FILE = {"file", "scale", "units", "order"}
 _MATERIAL = {"model", "young_modulus", "poisson_ratio", "density"}
 _CABLE = {"name", "points", "pull_point", "trunk_routing", "u_min", "u_max"}
 _ROUTING = {"angle_deg", "kind", "radius", "taper", "z_start", "z_end", "spacing"}
@@ -193,6 +194,21 @@ class _Reader:
 def _read_mesh(r: _Reader, d, base: Path) -> tuple[Mesh, dict]:
     if not isinstance(d, dict):
         r.fail("mesh", "expected a mapping with 'generate' or 'file'")
+    order = d.get("order", 1)
+    if order not in (1, 2) or isinstance(order, bool):
+        r.fail("mesh.order", f"expected 1 (4-node tetrahedra) or 2 (10-node tetrahedra), got {order!r}")
+    mesh, info = _read_mesh_cells(r, d, base)
+    if order == 2:
+        try:
+            mesh = quadratic(mesh)
+        except MeshError as exc:
+            r.fail("mesh.order", str(exc))
+    elif mesh.element.order == 2:
+        r.fail("mesh.order", f"the file holds 10-node tetrahedra: say 'order: 2' (got {order})")
+    return mesh, info
+
+
+def _read_mesh_cells(r: _Reader, d, base: Path) -> tuple[Mesh, dict]:
     if "file" in d:
         r.mapping(d, "mesh", _MESH_FILE)
         f = d["file"]

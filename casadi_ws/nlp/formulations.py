@@ -88,7 +88,7 @@ class FullSpaceNLP:
         m = model
         self.nq, self.nu = m.n_free, m.n_u
         self.nx = self.nq + self.nu
-        self._hv = ElementBatch(m.element_functions["hessian_vector"], m.backend)
+        self._hv = ElementBatch(m.hessian_vector_function(), m.backend)
         rng = np.random.default_rng(0)
         q = m.full(rng.normal(size=self.nq) * 1e-6)
         u = np.ones(self.nu)
