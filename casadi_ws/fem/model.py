@@ -217,18 +217,18 @@ class StaticModel:
         """Each actuator's quantity at q (a cable's length in m), (n_u,)."""
         return self.actuator_terms(q)[0]
 
+    def _point_hessian(self, i: int, h: np.ndarray) -> sp.csr_matrix:
+        """d2Q_i/dP2 (3k x 3k) of actuator i from the stacked nonzeros ``h`` of actuator_terms."""
+        sp_h = self._act[i].hessian_sparsity
+        r, c = sp_h.get_triplet()
+        return sp.csr_matrix((h[self._h_offsets[i]: self._h_offsets[i] + sp_h.nnz()], (r, c)),
+                             shape=(sp_h.size1(), sp_h.size2()))
+
     def actuator_hessians(self, q: np.ndarray) -> list[sp.csc_matrix]:
         """d2Q_a/dq2 on the free dofs, one sparse matrix per actuator."""
         _, _, h = self.actuator_terms(q, hessians=True)
-        out = []
-        for i, d in enumerate(self._act):
-            sp_h = d.hessian_sparsity
-            r, c = sp_h.get_triplet()
-            hi = sp.csr_matrix((h[self._h_offsets[i]: self._h_offsets[i] + sp_h.nnz()], (r, c)),
-                               shape=(sp_h.size1(), sp_h.size2()))
-            Wf = d.W[:, self.free]
-            out.append((Wf.T @ hi @ Wf).tocsc())
-        return out
+        return [(d.W[:, self.free].T @ self._point_hessian(i, h) @ d.W[:, self.free]).tocsc()
+                for i, d in enumerate(self._act)]
 
     def actuator_third(self, q: np.ndarray, lam_full: np.ndarray, u: np.ndarray):
         """The actuators' share of the Hessian of lam . R over (q, u) on the free dofs: the (q, q) block
@@ -243,11 +243,7 @@ class StaticModel:
             Wf = d.W[:, self.free]
             T = np.asarray(d.third(P, mu))
             Hqq = Hqq + (-sa * ua) * (Wf.T @ sp.csr_matrix(T) @ Wf)
-            sp_h = d.hessian_sparsity
-            r, c = sp_h.get_triplet()
-            hi = sp.csr_matrix((h[self._h_offsets[i]: self._h_offsets[i] + sp_h.nnz()], (r, c)),
-                               shape=(sp_h.size1(), sp_h.size2()))
-            cols.append(-sa * (Wf.T @ (hi @ mu)))
+            cols.append(-sa * (Wf.T @ (self._point_hessian(i, h) @ mu)))
         return Hqq, cols
 
     # ------------------------------------------------------------------ the static model

@@ -114,9 +114,10 @@ def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardRe
         A, S = sens if (it == 1 and sens is not None) else sensitivity(model, q, fac)
         # bounded linear least squares for du: min |tip + A du - target|^2, u_min <= u + du <= u_max
         du = bounded_step(A, target - tip, model.u_min - u, model.u_max - u)
-        if settings.edge_box is not None and np.abs(tip + A @ du - target).max() > 0.5 * scale:
+        miss = np.abs(tip + A @ du - target).max()
+        if settings.edge_box is not None and miss > 0.5 * scale:
             du_box, _ = closest_to_box(A, target - tip, model.u_min - u, model.u_max - u, settings.edge_box * scale)
-            if np.abs(tip + A @ du_box - target).max() < np.abs(tip + A @ du - target).max():
+            if np.abs(tip + A @ du_box - target).max() < miss:
                 du = du_box
         if not np.any(du):
             return BackwardResult(q, u, tip, SOLVED, it - 1, n_eq, n_fac, fac)

@@ -245,7 +245,8 @@ class Exploration:
                 self.counters["backward_solves"] += 1
                 self.counters["equilibrium_solves"] += n_eq
                 self.counters["factorizations"] += n_fac
-                hit = ok and np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9))
+                on_target = ok and np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9))
+                hit = on_target
                 if not hit:
                     self._fail(target, Status(status) if not ok else Status.NOT_REACHED)
                     if ok and self.uniform:
@@ -255,7 +256,7 @@ class Exploration:
                     if cell not in self.visited:  # adopted: explored by the answer that landed in it
                         self.visited.add(cell)
                         self.counters["explored"] += 1
-                    if not np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9)):
+                    if not on_target:
                         self.counters["adopted"] += 1
                     new = _Config(cell, tip, q, u, A, S)
                     new_frontier.append(new)
@@ -397,7 +398,3 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
             run.finish()  # complete: the result files replace the checkpoint, which a budget stop keeps
         return result
 
-
-def _linear_closest(A, p, u, model, target):
-    """Tip of the linearised model closest to target over the remaining input range."""
-    return p + A @ bounded_step(A, target - p, model.u_min - u, model.u_max - u)
