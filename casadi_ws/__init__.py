@@ -8,10 +8,12 @@ The package is layered; each sub-package imports only those listed before it:
 
 from .actuation import Actuator, Cable, trunk_cable
 from .control import FollowResult, ReachResult, ReachSettings, follow, reach
-from .fem import TET4, ElementType, Material, Mesh, MeshError, StaticModel, box_mesh, load_mesh, trunk_mesh
+from .fem import (TET4, ElementType, Material, Mesh, MeshError, StaticModel, box_mesh, load_mesh, point_function,
+                  residual_function, trunk_mesh)
 from .io import Problem, ProblemError, SolverSettings, default_problem, load_problem, problem_from_dict
 from .runtime import Executor, ProcessExecutor, SerialExecutor
-from .solvers import Equilibrium, solve_equilibrium
+from .nlp import EquilibriumNLP, NLPSolution, tracking
+from .solvers import Equilibrium, equilibrium_function, solve_equilibrium
 from .status import Status
 from .workspace import (BackwardSettings, FBSettings, ForwardSettings, WorkspaceResult, compare, forward,
                         forward_backward, load_result)
@@ -22,6 +24,7 @@ __all__ = [
     "Cable",
     "ElementType",
     "Equilibrium",
+    "EquilibriumNLP",
     "Executor",
     "FBSettings",
     "FollowResult",
@@ -29,6 +32,7 @@ __all__ = [
     "Material",
     "Mesh",
     "MeshError",
+    "NLPSolution",
     "Problem",
     "ProblemError",
     "ProcessExecutor",
@@ -43,15 +47,19 @@ __all__ = [
     "box_mesh",
     "compare",
     "default_problem",
+    "equilibrium_function",
     "follow",
     "forward",
     "forward_backward",
     "load_mesh",
     "load_problem",
     "load_result",
+    "point_function",
     "problem_from_dict",
     "reach",
+    "residual_function",
     "solve_equilibrium",
+    "tracking",
     "trunk_cable",
     "trunk_mesh",
 ]

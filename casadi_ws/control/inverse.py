@@ -1,7 +1,7 @@
 """Inverse control with the workspace method's NLP: reach a target, follow a path of targets.
 
 ``reach`` solves  min |p_E(q) - target|^2 (+ rho |u - u_ref|^2)  s.t.  R(q, u) = 0, u in U  with IPOPT and
-exact derivatives (:class:`casadi_ws.nlp.formulations.TrackingNLP`), from rest or from a warm start. If the direct solve
+exact derivatives (:func:`casadi_ws.nlp.formulations.tracking`), from rest or from a warm start. If the direct solve
 fails, it follows a homotopy: the target moves from the current tip to the goal in steps, each solve
 warm-started by the previous one. The answer is always re-verified by a Newton solve at the returned u.
 
@@ -22,7 +22,7 @@ import numpy as np
 from ..solvers.equilibrium import CONVERGED, solve_equilibrium
 from ..status import Status
 from ..fem.model import StaticModel
-from ..nlp.formulations import TrackingNLP
+from ..nlp.formulations import EquilibriumNLP, tracking
 
 __all__ = ["FollowResult", "ReachResult", "ReachSettings", "follow", "reach"]
 
@@ -65,7 +65,7 @@ class ReachResult:
                 "homotopy": self.homotopy, "units": {"tip": "m", "u": "N", "error": "m"}}
 
 
-def _solver(model, settings: ReachSettings) -> TrackingNLP:
+def _solver(model, settings: ReachSettings) -> EquilibriumNLP:
     # the points themselves are part of the key: two sets of the same size are different problems
     key = (np.asarray(settings.extra_points, dtype=float).tobytes(), settings.regularization)
     cache = model.__dict__.setdefault("_tracking_nlps", {})
@@ -73,7 +73,7 @@ def _solver(model, settings: ReachSettings) -> TrackingNLP:
         points = None
         if settings.extra_points:
             points = np.vstack([model.p0[None], np.asarray(settings.extra_points, float)])
-        cache[key] = TrackingNLP(model, points=points, rho=settings.regularization)
+        cache[key] = tracking(model, points=points, rho=settings.regularization)
     return cache[key]
 
 
@@ -94,9 +94,8 @@ def reach(problem_or_model, target, q0=None, u0=None, settings: ReachSettings | 
     if settings.max_du is not None:
         lo, hi = u0 - settings.max_du, u0 + settings.max_du
 
-    q, u, stats = nlp.solve(targets, q0, u0, u_ref=u_ref, u_lower=lo, u_upper=hi)
-    its = int(stats.get("iter_count", 0))
-    ok = bool(stats.get("success"))
+    sol = nlp.solve(q0, u0, u_lower=lo, u_upper=hi, targets=targets.T, u_ref=u_ref)
+    q, u, its, ok = sol.q, sol.u, sol.iterations, sol.success
     used_homotopy = False
     if not ok:  # move the target from where the tip is, in steps, warm-starting each solve
         used_homotopy = True
@@ -105,9 +104,8 @@ def reach(problem_or_model, target, q0=None, u0=None, settings: ReachSettings | 
         for k in range(1, settings.homotopy_steps + 1):
             t_k = targets.copy()
             t_k[0] = tip0 + (target - tip0) * k / settings.homotopy_steps
-            q, u, stats = nlp.solve(t_k, q, u, u_ref=u_ref, u_lower=lo, u_upper=hi)
-            its += int(stats.get("iter_count", 0))
-            ok = bool(stats.get("success"))
+            sol = nlp.solve(q, u, u_lower=lo, u_upper=hi, targets=t_k.T, u_ref=u_ref)
+            q, u, its, ok = sol.q, sol.u, its + sol.iterations, sol.success
     eq = solve_equilibrium(model, u, q0=q0, u0=u0, guess=q)
     if eq.status != CONVERGED:
         return ReachResult(False, u0, model.tip(q0), float(np.linalg.norm(model.tip(q0) - target)),

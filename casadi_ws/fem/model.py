@@ -281,6 +281,34 @@ class StaticModel:
         _, dQ, _ = self.actuator_terms(q)
         return (dQ * self.sign[:, None])[:, self.free]
 
+    def residual_hessian(self, q: np.ndarray, u: np.ndarray, lam: np.ndarray):
+        """Second derivatives of lam . R (lam on the free dofs): (d(K^T lam)/dq on the free dofs, sparse;
+        d(K^T lam)/du = d(dR/du^T lam)/dq, dense (n_free, n_u)). K^T lam, not K lam: the corotational
+        tangent is not exactly symmetric, and this is what reverse-mode AD differentiates."""
+        if "_hv" not in self.__dict__:
+            self._hv = ElementBatch(self.hessian_vector_function(), self.backend)
+        lam_full = np.zeros(self.n_dof)
+        lam_full[self.free] = lam
+        he, = self._hv(*self._element_inputs(q), lam_full[self._edofs])
+        Hact, cols = self.actuator_third(q, lam_full, np.asarray(u, dtype=float))
+        Hqu = np.column_stack(cols) if cols else np.zeros((self.n_free, 0))
+        return self.assemble(he) + Hact, Hqu
+
+    @property
+    def u_lower(self) -> np.ndarray:
+        """Lower bounds of u (the box U), (n_u,)."""
+        return self.u_min
+
+    @property
+    def u_upper(self) -> np.ndarray:
+        """Upper bounds of u, (n_u,)."""
+        return self.u_max
+
+    @property
+    def q_rest(self) -> np.ndarray:
+        """The free degrees of freedom at rest (zeros, (n_free,)): a start for an NLP over q."""
+        return np.zeros(self.n_free)
+
     def tip(self, q: np.ndarray) -> np.ndarray:
         """End-effector position p_E = C q + p_E(0)."""
         return self.C @ q + self.p0

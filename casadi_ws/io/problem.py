@@ -53,6 +53,9 @@ class SolverSettings:
     """Newton iterations per solve (each load step of a continuation counts separately)."""
     max_load_steps: int = 64
     """Continuation steps allowed when a direct Newton solve fails."""
+    newton: str = "builtin"
+    """``builtin`` (Newton reusing LU factorisations across iterations and points: the faster) or
+    ``rootfinder`` (casadi.rootfinder's Newton with MUMPS on the same residual Function)."""
 
 
 @dataclass
@@ -119,7 +122,7 @@ _MESH_FILE = {"file", "scale", "units", "order"}
 _MATERIAL = {"model", "young_modulus", "poisson_ratio", "density"}
 _CABLE = {"name", "points", "pull_point", "trunk_routing", "u_min", "u_max"}
 _ROUTING = {"angle_deg", "kind", "radius", "taper", "z_start", "z_end", "spacing"}
-_SOLVER = {"tolerance", "max_iterations", "max_load_steps"}
+_SOLVER = {"tolerance", "max_iterations", "max_load_steps", "newton"}
 _WORKSPACE = {"method", "n_d", "step", "strategy", "backward", "workers"}
 
 # Largest distance from the mesh allowed for a cable passage point, relative to the mesh's size. SOFA trunk
@@ -391,7 +394,10 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     s = r.mapping(d.get("solver") or {}, "solver", _SOLVER)
     solver = SolverSettings(r.number(s, "tolerance", "solver", 1e-8, lo=0.0, lo_open=True),
                             r.number(s, "max_iterations", "solver", 30, lo=1, integer=True),
-                            r.number(s, "max_load_steps", "solver", 64, lo=1, integer=True))
+                            r.number(s, "max_load_steps", "solver", 64, lo=1, integer=True),
+                            s.get("newton", "builtin"))
+    if solver.newton not in ("builtin", "rootfinder"):
+        r.fail("solver.newton", f"expected builtin or rootfinder, got {solver.newton!r}")
     w = r.mapping(d.get("workspace") or {}, "workspace", _WORKSPACE)
     workspace = {}
     if "method" in w:

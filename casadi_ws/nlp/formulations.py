@@ -1,43 +1,37 @@
-"""NLP formulations over the static model, solved by IPOPT with exact derivatives.
+"""Optimisation problems over the static equilibria, written as CasADi expressions and solved by IPOPT.
 
-The full-space problem has variables x = (q_free, u) and parameters p (here: a target):
+A problem is built step by step, as with ``casadi.Opti``, on the model's CasADi Functions
+(:func:`casadi_ws.fem.functions.residual_function`, :func:`casadi_ws.fem.functions.point_function`):
 
-    min_x  || C q + p_E(0) - target ||^2      s.t.  R(q, u) = 0,   u_min <= u <= u_max
+    nlp = EquilibriumNLP(model)                     # variables q (free dofs), u; constraint R(q, u) = 0
+    t = nlp.parameter("target", 3)                  # a parameter: one solver serves many targets
+    nlp.minimize(casadi.sumsqr(nlp.point() - t))    # any expression of nlp.q, nlp.u and parameters
+    nlp.subject_to(nlp.point()[1], lower=0.02)      # any constraint lower <= expr <= upper
+    sol = nlp.solve(q, u, target=[0.01, 0.03, 0.19])
 
-CasADi's ``nlpsol`` would build the gradient, constraint Jacobian and Lagrangian Hessian by AD through the
-whole mesh (about 1 s per Hessian on the trunk). Instead they are supplied as CasADi Callbacks that call the
-model, which assembles them from the compiled per-element functions:
+CasADi derives every gradient, Jacobian and Hessian from these expressions; the model's Callbacks supply
+the exact derivatives of R (assembled, not AD through the mesh). u's box is passed to IPOPT as simple
+bounds, and can be tightened per solve. Each solve is warm-started in the primal and the constraint
+multipliers of the previous successful solve, with IPOPT options chosen for warm starts
+(:data:`IPOPT_OPTIONS`).
 
-    dR/dq      = K (element stiffness - sum_a sign_a u_a d2Q_a)     the Newton tangent
-    dR/du_a    = -sign_a dQ_a/dq                                  (a cable: sign -1, Q = its length)
-    d2(lam.R)  = sum_e d(K_e^T lam_e)/dq_e  -  sum_a sign_a u_a d2(lam . dQ_a)/dq2      (q, q)
-                 -sign_a d2Q_a lam                                                (q, u_a)
-
-the actuators' terms derived by CasADi from each actuator's quantity (:mod:`casadi_ws.actuation`).
-
-The same pieces (:class:`FullSpaceNLP`) serve every formulation. :class:`TrackingNLP` is the one in use:
-the backward problem (8) of the forward-backward method is its one-point case, and inverse control
-(:mod:`casadi_ws.control.inverse`) adds points, a regularisation and limits on the change of u. Adding an objective
-term means adding its value and gradient in ``grad_f`` and its Hessian in ``hess_lag``; adding a constraint
-means appending rows to ``g`` and ``jac_g`` and its multiplier's Hessian to ``hess_lag`` (see
-docs/nlp-library.md).
+:func:`tracking` is the problem the package itself solves: the backward problem (8) of the
+forward-backward method is its one-point case; inverse control (:mod:`casadi_ws.control.inverse`) adds
+points, a regularisation and limits on the change of u.
 """
 
 from __future__ import annotations
 
-import contextlib
 import gc
-import os
-import sys
-
-import numpy as np
-import scipy.sparse as sp
+from dataclasses import dataclass
 
 import casadi as ca
+import numpy as np
 
-from ..fem.kernels import ElementBatch
+from ..fem.functions import point_function, residual_function
+from ..solvers.rootfinder import quiet_stdout
 
-__all__ = ["FullSpaceNLP", "TrackingNLP", "quiet_stdout", "release_solvers"]
+__all__ = ["EquilibriumNLP", "IPOPT_OPTIONS", "NLPSolution", "quiet_stdout", "release_solvers", "tracking"]
 
 IPOPT_OPTIONS = {
     # measured on the backward problem: gradient scaling quadruples the iterations from a warm start
@@ -53,251 +47,156 @@ IPOPT_OPTIONS = {
     "ipopt.print_level": 0,
     "ipopt.sb": "yes",
     "print_time": False,
-    "calc_lam_p": False,  # multipliers of the parameters would need AD through the callbacks
-    "no_nlp_grad": True,
+    # derivative Functions of the model's Callbacks take many directions at once (CasADi's default: 64)
+    "oracle_options": {"max_num_dir": 512},
 }
 
 
-def _pattern(M: sp.spmatrix) -> ca.Sparsity:
-    M = M.tocsc()
-    M.sort_indices()
-    return ca.Sparsity(M.shape[0], M.shape[1], M.indptr.tolist(), M.indices.tolist())
+@dataclass
+class NLPSolution:
+    """What one solve returns."""
+
+    q: np.ndarray
+    """Nodal displacements, all dofs (3n): IPOPT's last iterate (re-verify before reporting it)."""
+    u: np.ndarray
+    """Inputs, clipped to the bounds of the solve."""
+    success: bool
+    """IPOPT reported success."""
+    iterations: int
+    stats: dict
+    """IPOPT's statistics (``casadi.Function.stats()``)."""
+    objective: float
+    p: np.ndarray
+    """The parameters' values of this solve, stacked."""
 
 
-class _Values:
-    """Scatter a scipy matrix onto a fixed CSC pattern (entries outside it must be zero)."""
+class EquilibriumNLP:
+    """min f(q, u; p)  s.t.  R(q, u) = 0,  lower <= g(q, u; p) <= upper,  u in U (see the module docstring).
 
-    def __init__(self, pattern: sp.csc_matrix):
-        P = pattern.tocsc()
-        P.sort_indices()
-        self.shape = P.shape
-        self.rows = P.indices.copy()
-        self.cols = np.repeat(np.arange(P.shape[1]), np.diff(P.indptr))
-        self.sparsity = _pattern(P)
-
-    def __call__(self, M) -> ca.DM:
-        vals = np.asarray(sp.csr_matrix(M)[self.rows, self.cols]).ravel()
-        return ca.DM(self.sparsity, vals)
-
-
-class FullSpaceNLP:
-    """Derivative pieces of the static model over x = (q_free, u) (see the module docstring)."""
-
-    def __init__(self, model):
-        self.model = model
-        m = model
-        self.nq, self.nu = m.n_free, m.n_u
-        self.nx = self.nq + self.nu
-        self._hv = ElementBatch(m.hessian_vector_function(), m.backend)
-        rng = np.random.default_rng(0)
-        q = m.full(rng.normal(size=self.nq) * 1e-6)
-        u = np.ones(self.nu)
-        lam = rng.normal(size=self.nq)
-        _, K, dRdu = m.residual_and_tangent(q, u)
-        self.jac_pattern = sp.hstack([abs(K) + 1.0 * (K != 0), sp.csc_matrix(np.ones_like(dRdu))]).tocsc()
-        H = self.hessian(q, u, lam, 1.0)
-        H = abs(H) + (H != 0) + sp.csc_matrix(([1.0] * self.nx, (range(self.nx), range(self.nx))),
-                                              shape=(self.nx, self.nx))
-        self.hess_pattern = sp.triu(H).tocsc()
-        self.jac_values = _Values(self.jac_pattern)
-        self.hess_values = _Values(self.hess_pattern)
-
-    def split(self, x):
-        x = np.asarray(x, dtype=float).ravel()
-        return self.model.full(x[:self.nq]), x[self.nq:]
-
-    def jacobian(self, q, u) -> sp.csc_matrix:
-        _, K, dRdu = self.model.residual_and_tangent(q, u)
-        return sp.hstack([K, sp.csc_matrix(dRdu)]).tocsc()
-
-    def hessian(self, q, u, lam_g, lam_f, objective_hessian=None) -> sp.csc_matrix:
-        """Hessian of lam_f * f + lam_g . R over x (full, symmetric)."""
-        m = self.model
-        lam = np.zeros(m.n_dof)
-        lam[m.free] = lam_g
-        ue, Xe, Ge, Pe = m._element_inputs(q)
-        he, = self._hv(ue, Xe, Ge, Pe, lam[m._edofs])
-        Hqq = m.assemble(he)
-        Hqq = 0.5 * (Hqq + Hqq.T)
-        Hact, cols = m.actuator_third(q, lam, u)
-        Hqq = Hqq + Hact
-        if objective_hessian is not None:
-            Hqq = Hqq + lam_f * objective_hessian
-        Hqu = sp.csc_matrix(np.column_stack(cols)) if cols else sp.csc_matrix((self.nq, 0))
-        return sp.bmat([[Hqq, Hqu], [Hqu.T, None]], format="csc") if self.nu else Hqq.tocsc()
-
-
-class _Fn(ca.Callback):
-    """A CasADi Callback around a Python function of numpy arrays with fixed output sparsities."""
-
-    def __init__(self, name, ins, outs, fn):
-        ca.Callback.__init__(self)
-        self._ins, self._outs, self._fn = ins, outs, fn
-        self.construct(name, {})
-
-    def get_n_in(self):
-        return len(self._ins)
-
-    def get_n_out(self):
-        return len(self._outs)
-
-    def get_name_in(self, i):
-        return self._ins[i][0]
-
-    def get_name_out(self, i):
-        return self._outs[i][0]
-
-    def get_sparsity_in(self, i):
-        return self._ins[i][1]
-
-    def get_sparsity_out(self, i):
-        return self._outs[i][1]
-
-    def eval(self, arg):
-        return self._fn(*[np.asarray(a.full()) for a in arg])
-
-
-class TrackingNLP:
-    """IPOPT over (q, u): min sum_i w_i |p_i(q) - t_i|^2 + rho |u - u_ref|^2 s.t. R(q, u) = 0, u in bounds.
-
-    ``points`` are rest positions of embedded points (default: the end-effector alone); their targets t_i
-    and the reference u_ref are parameters, so one solver serves a whole sequence of targets with warm
-    starts. ``rho`` (m^2/N^2) is a small regularisation preferring low tensions (u_ref = 0) or small
-    changes (u_ref = previous u). Bounds on u can be tightened per solve (e.g. a limit on the change of u).
-    Built once per model: building costs about one Hessian evaluation.
+    ``q`` (MX, the free dofs) and ``u`` (MX) are the variables; ``R`` is the model's residual Function.
     """
 
-    def __init__(self, model, points=None, weights=None, rho: float = 0.0):
-        from ..fem.mesh import embed
-
+    def __init__(self, model, options: dict | None = None):
         self.model = model
-        self.pieces = pieces = FullSpaceNLP(model)
-        nx, nq, nu = pieces.nx, pieces.nq, pieces.nu
-        if points is None:
-            Cs = [model.C_free]
-            p0s = [model.p0]
-        else:
-            pts = np.atleast_2d(np.asarray(points, dtype=float))
-            Cs, p0s = [], []
-            for pt in pts:
-                W = embed(model.mesh, pt[None]).matrix(model.mesh).tocsr()
-                Cs.append(W[:, model.free].tocsc())
-                p0s.append(W @ model.X)
-        w = np.ones(len(Cs)) if weights is None else np.asarray(weights, dtype=float)
-        self.n_points = len(Cs)
-        C = sp.vstack(Cs).tocsc()
-        p0 = np.concatenate(p0s)
-        W = np.repeat(w, 3)
-        self._objective_hessian = (2.0 * C.T @ sp.diags(W) @ C).tocsc()
-        self.rho = float(rho)
-        dense = ca.Sparsity.dense
-        n_p = 3 * self.n_points + nu
+        self.q = ca.MX.sym("q", model.n_free)
+        self.u = ca.MX.sym("u", model.n_u)
+        self.R = residual_function(model)
+        self.options = dict(IPOPT_OPTIONS, **(options or {}))
+        self._objective = ca.MX(0)
+        self._g, self._lbg, self._ubg = [self.R(self.q, self.u)], [np.zeros(model.n_free)], [np.zeros(model.n_free)]
+        self._params: dict[str, tuple[ca.MX, np.ndarray]] = {}
+        self._solver = None
+        self._lam_g = None
 
-        def parts(x, p):
-            x = np.asarray(x, float).ravel()
-            p = np.asarray(p, float).ravel()
-            qf, u = x[:nq], x[nq:]
-            e = C @ qf + p0 - p[:3 * self.n_points]
-            du = u - p[3 * self.n_points:]
-            return qf, u, e, du
+    # ------------------------------------------------------------------ building
+    def parameter(self, name: str, rows: int, cols: int = 1, value=0.0) -> ca.MX:
+        """A parameter (set at each solve by name, default ``value``)."""
+        self._reset()
+        p = ca.MX.sym(name, rows, cols)
+        self._params[name] = (p, np.broadcast_to(np.asarray(value, dtype=float), (rows, cols)).copy())
+        return p
 
-        def f_and_g(x, p):
-            qf, u, e, du = parts(x, p)
-            q = model.full(qf)
-            f = float(e @ (W * e)) + self.rho * float(du @ du) + float(self.extra_value(q, u))
-            return [ca.DM(f), ca.DM(model.residual(q, u))]
+    def point(self, points=None) -> ca.MX:
+        """Positions (3 x k) of embedded points at q; default the end-effector (3 x 1)."""
+        return point_function(self.model, points)(self.q)
 
-        def grad_f(x, p):
-            qf, u, e, du = parts(x, p)
-            q = model.full(qf)
-            f = float(e @ (W * e)) + self.rho * float(du @ du) + float(self.extra_value(q, u))
-            g = np.concatenate([2.0 * (C.T @ (W * e)), 2.0 * self.rho * du]) + self.extra_gradient(q, u)
-            return [ca.DM(f), ca.DM(g)]
+    def minimize(self, expr) -> None:
+        """Add a term to the objective."""
+        self._reset()
+        self._objective = self._objective + expr
 
-        def jac_g(x, p):
-            q, u = pieces.split(x)
-            return [ca.DM(model.residual(q, u)), pieces.jac_values(pieces.jacobian(q, u))]
+    def subject_to(self, expr, lower=-np.inf, upper=np.inf) -> None:
+        """Add constraints lower <= expr <= upper (broadcast to expr's entries)."""
+        self._reset()
+        expr = ca.vec(ca.MX(expr))
+        n = expr.numel()
+        self._g.append(expr)
+        self._lbg.append(np.broadcast_to(np.asarray(lower, dtype=float), (n,)).ravel())
+        self._ubg.append(np.broadcast_to(np.asarray(upper, dtype=float), (n,)).ravel())
 
-        def hess_lag(x, p, lam_f, lam_g):
-            q, u = pieces.split(x)
-            lf = float(np.asarray(lam_f).ravel()[0])
-            H = pieces.hessian(q, u, np.asarray(lam_g).ravel(), lf, self._objective_hessian)
-            if self.rho and nu:
-                H = H + sp.diags(np.concatenate([np.zeros(nq), np.full(nu, 2.0 * self.rho * lf)]))
-            extra = self.extra_hessian(q, u)
-            if extra is not None:
-                H = H + lf * extra
-            return [self.hess_values(sp.triu(H))]
+    def _reset(self):
+        with quiet_stdout():  # a destroyed solver's MUMPS says goodbye on stdout
+            self._solver, self._lam_g = None, None
 
-        # the Hessian's sparsity is fixed before the first solve: include the extra term's pattern
-        rng = np.random.default_rng(1)
-        q_probe = model.full(rng.normal(size=nq) * 1e-6)
-        extra = self.extra_hessian(q_probe, np.ones(nu))
-        pattern = pieces.hess_pattern
-        if extra is not None:
-            pattern = (abs(pattern) + sp.triu(abs(extra) + (extra != 0))).tocsc()
-        self.hess_values = _Values(pattern)
+    @property
+    def solver(self) -> ca.Function:
+        """The IPOPT Function (built on first use)."""
+        if self._solver is None:
+            p = ca.vertcat(*[ca.vec(s) for s, _ in self._params.values()]) if self._params else ca.MX(0, 1)
+            nlp = {"x": ca.vertcat(self.q, self.u), "p": p, "f": self._objective, "g": ca.vertcat(*self._g)}
+            self._solver = ca.nlpsol("equilibrium_nlp", "ipopt", nlp, self.options)
+        return self._solver
 
-        xs, ps = ("x", dense(nx, 1)), ("p", dense(n_p, 1))
-        self._cbs = [
-            _Fn("nlp", [xs, ps], [("f", dense(1, 1)), ("g", dense(nq, 1))], f_and_g),
-            _Fn("grad_f", [xs, ps], [("f", dense(1, 1)), ("grad_f_x", dense(nx, 1))], grad_f),
-            _Fn("jac_g", [xs, ps], [("g", dense(nq, 1)), ("jac_g_x", pieces.jac_values.sparsity)], jac_g),
-            _Fn("hess_lag", [xs, ps, ("lam_f", dense(1, 1)), ("lam_g", dense(nq, 1))],
-                [("hess_gamma_x_x", self.hess_values.sparsity)], hess_lag),
-        ]
-        opts = dict(IPOPT_OPTIONS, grad_f=self._cbs[1], jac_g=self._cbs[2], hess_lag=self._cbs[3])
-        self.solver = ca.nlpsol("tracking", "ipopt", self._cbs[0], opts)
-        self.lam_g = np.zeros(nq)
+    # ------------------------------------------------------------------ solving
+    def _p(self, values: dict) -> np.ndarray:
+        unknown = set(values) - set(self._params)
+        if unknown:
+            raise KeyError(f"unknown parameter(s) {sorted(unknown)}; this problem has {sorted(self._params)}")
+        out = []
+        for name, (sym, default) in self._params.items():
+            v = np.asarray(default if values.get(name) is None else values[name], dtype=float)
+            if v.size == sym.numel():  # a vector for a column, or the matrix itself
+                out.append(v.reshape(sym.shape, order="F").ravel(order="F"))
+            else:
+                out.append(np.broadcast_to(v, sym.shape).ravel(order="F"))
+        return np.concatenate(out) if out else np.zeros(0)
 
-    # hooks for further objective terms (see docs/nlp-library.md); q is the full displacement vector
-    def extra_value(self, q, u) -> float:
-        return 0.0
-
-    def extra_gradient(self, q, u) -> np.ndarray:
-        return np.zeros(self.pieces.nx)
-
-    def extra_hessian(self, q, u):
-        """Hessian over x = (q_free, u) of the extra term (sparse), or None."""
-        return None
-
-    def solve(self, targets, q, u, u_ref=None, u_lower=None, u_upper=None):
-        """Warm-started solve; returns (q_full, u, IPOPT stats). ``targets``: (n_points, 3)."""
+    def solve(self, q, u, u_lower=None, u_upper=None, **parameters) -> NLPSolution:
+        """Warm-started solve from (q, u) (q: all dofs); bounds on u may be tightened for this solve."""
         m = self.model
-        nq = self.pieces.nq
+        nq = m.n_free
         lbu = m.u_min if u_lower is None else np.maximum(m.u_min, u_lower)
         ubu = m.u_max if u_upper is None else np.minimum(m.u_max, u_upper)
-        u0 = np.clip(u, lbu, ubu)
-        p = np.concatenate([np.asarray(targets, float).ravel(),
-                            np.zeros(m.n_u) if u_ref is None else np.asarray(u_ref, float)])
+        u0 = np.clip(np.asarray(u, dtype=float), lbu, ubu)
+        solver = self.solver
+        args = dict(x0=np.concatenate([np.asarray(q, dtype=float)[m.free], u0]), p=self._p(parameters),
+                    lbx=np.concatenate([np.full(nq, -np.inf), lbu]), ubx=np.concatenate([np.full(nq, np.inf), ubu]),
+                    lbg=np.concatenate(self._lbg), ubg=np.concatenate(self._ubg))
+        if self._lam_g is not None:
+            args["lam_g0"] = self._lam_g
         with quiet_stdout():
-            sol = self.solver(x0=np.concatenate([q[m.free], u0]), p=p,
-                              lbx=np.concatenate([np.full(nq, -np.inf), lbu]),
-                              ubx=np.concatenate([np.full(nq, np.inf), ubu]), lbg=0, ubg=0, lam_g0=self.lam_g)
-        stats = self.solver.stats()
+            sol = solver(**args)
+        stats = solver.stats()
         x = np.asarray(sol["x"]).ravel()
-        if stats.get("success"):
-            self.lam_g = np.asarray(sol["lam_g"]).ravel()
-        q_new, u_new = self.pieces.split(x)
-        return q_new, np.clip(u_new, lbu, ubu), stats
+        ok = bool(stats.get("success"))
+        if ok:
+            self._lam_g = np.asarray(sol["lam_g"]).ravel()
+        return NLPSolution(m.full(x[:nq]), np.clip(x[nq:], lbu, ubu), ok, int(stats.get("iter_count", 0)),
+                           stats, float(sol["f"]), args["p"])
+
+    def value(self, expr, sol: NLPSolution) -> np.ndarray:
+        """Evaluate an expression of q, u and the parameters at ``sol``."""
+        syms = [self.q, self.u] + [s for s, _ in self._params.values()]
+        f = ca.Function("value", syms, [ca.MX(expr)])
+        p = sol.p
+        vals, k = [], 0
+        for s, _ in self._params.values():
+            vals.append(p[k:k + s.numel()].reshape(s.shape, order="F"))
+            k += s.numel()
+        return np.asarray(f(sol.q[self.model.free], sol.u, *vals)).squeeze()
 
 
-_SOLVERS: dict[int, TrackingNLP] = {}
+def tracking(model, points=None, weights=None, rho: float = 0.0) -> EquilibriumNLP:
+    """min sum_i w_i |p_i(q) - t_i|^2 + rho |u - u_ref|^2   s.t.  R(q, u) = 0,  u in U.
+
+    ``points``: rest positions (k, 3) of embedded points (default: the end-effector). Parameters:
+    ``targets`` (3 x k, one column per point) and ``u_ref`` (default 0). ``rho`` (m^2/N^2) is a small
+    regularisation preferring low inputs (u_ref = 0) or small changes (u_ref = the previous u).
+    """
+    nlp = EquilibriumNLP(model)
+    p = nlp.point(points)
+    k = p.shape[1]
+    w = np.ones(k) if weights is None else np.asarray(weights, dtype=float)
+    targets = nlp.parameter("targets", 3, k)
+    u_ref = nlp.parameter("u_ref", model.n_u)
+    for i in range(k):
+        nlp.minimize(w[i] * ca.sumsqr(p[:, i] - targets[:, i]))
+    if rho:
+        nlp.minimize(rho * ca.sumsqr(nlp.u - u_ref))
+    return nlp
 
 
-@contextlib.contextmanager
-def quiet_stdout():
-    """Silence the C-level stdout (MUMPS prints 'Entering DMUMPS ... JOB=-2' when a solver is destroyed)."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 1)
-        yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-        os.close(devnull)
+_SOLVERS: dict[int, EquilibriumNLP] = {}
 
 
 def release_solvers() -> None:
@@ -305,5 +204,4 @@ def release_solvers() -> None:
     with quiet_stdout():
         _SOLVERS.clear()
         gc.collect()
-
 

@@ -1,7 +1,8 @@
-"""Equilibrium solvers: Newton with continuation, sensitivities, bounded linear least squares."""
+"""Equilibrium solvers: Newton with continuation, casadi.rootfinder, sensitivities, bounded least squares."""
 
 from .equilibrium import Equilibrium, Factorization, factorize, solve_equilibrium, tangent_factorization, verify
+from .rootfinder import equilibrium_function, release_rootfinders
 from .sensitivity import bounded_step, sensitivity
 
-__all__ = ["Equilibrium", "Factorization", "bounded_step", "factorize", "sensitivity", "solve_equilibrium",
-           "tangent_factorization", "verify"]
+__all__ = ["Equilibrium", "Factorization", "bounded_step", "equilibrium_function", "factorize",
+           "release_rootfinders", "sensitivity", "solve_equilibrium", "tangent_factorization", "verify"]

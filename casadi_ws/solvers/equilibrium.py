@@ -108,10 +108,17 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
     reused, otherwise refreshed. In soft, cable-loaded bodies the correction can stall in a soft mode while
     the residual, which is what verification reads, falls 1000x: a chord step that cuts the residual 100x
     is therefore taken even when the correction test objects. A factorisation passed in is tried first.
+    With ``solver.newton: rootfinder`` the solve is casadi.rootfinder's instead (:mod:`.rootfinder`).
 
     With ``target`` (< tol) it iterates on towards that residual, but a stop below ``tol`` still counts as
     converged: a point is never a failure once its residual passes the check.
     """
+    if getattr(model.problem.solver, "newton", "builtin") == "rootfinder":
+        from .rootfinder import rootfinder_newton
+
+        q, rel, its = rootfinder_newton(model, u, q, load, tol, max_iter)
+        status = CONVERGED if rel < tol else (DIVERGED if not np.isfinite(rel) else MAX_ITERATIONS)
+        return _Newton(q, status, its, its, rel, None)
     free = model.free
     q = q.copy()
     R, scale = model.residual(q, u, load, with_scale=True)

@@ -9,8 +9,8 @@ solved from a nearby equilibrium (the neighbour the target came from). Formulati
              du to the tip; a bounded linear least-squares problem gives du; the equilibrium at u + du is
              corrected by Newton from the predictor q + K^-1 H^T du. Repeated until the step is small. Each
              iterate is a verified equilibrium, so the answer always is one.
-``ipopt``    the full-space NLP over (q, u) (see :mod:`casadi_ws.nlp.formulations`), with exact derivatives from the
-             element functions and a primal-dual warm start; the answer is then re-verified.
+``ipopt``    the full-space NLP over (q, u) (:func:`casadi_ws.nlp.formulations.tracking`), with exact derivatives
+             from the model's CasADi Functions and a primal-dual warm start; the answer is then re-verified.
 
 Status codes (``BackwardResult.status``, :mod:`casadi_ws.status`): 0 converged (a verified equilibrium,
 closest point found), 5 iteration limit (the last verified equilibrium is returned), 6 solve failed (an
@@ -148,16 +148,15 @@ def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardRe
 
 def backward_ipopt(model, target, q, u, settings):
     """Backward problem (8) by the full-space NLP; the answer is re-verified by a Newton solve."""
-    from ..nlp.formulations import _SOLVERS, TrackingNLP
+    from ..nlp.formulations import _SOLVERS, tracking
 
     nlp = _SOLVERS.get(id(model))
     if nlp is None or nlp.model is not model:
-        nlp = _SOLVERS[id(model)] = TrackingNLP(model)
-    q_new, u_new, stats = nlp.solve(np.asarray(target)[None], q, u)
+        nlp = _SOLVERS[id(model)] = tracking(model)
+    sol = nlp.solve(q, u, targets=target)
     # verify: the same equilibrium test as everywhere else, from IPOPT's answer
-    eq = solve_equilibrium(model, u_new, q0=q, u0=u, guess=q_new)
+    eq = solve_equilibrium(model, sol.u, q0=q, u0=u, guess=sol.q)
     if eq.status != CONVERGED:
-        return BackwardResult(q, u, model.tip(q), FAILED, stats.get("iter_count", 0), 1, eq.factorizations)
-    status = SOLVED if stats.get("success") else ITERATION_LIMIT
-    return BackwardResult(eq.q, u_new, eq.tip, status, stats.get("iter_count", 0), 1, eq.factorizations,
-                          eq.factorization)
+        return BackwardResult(q, u, model.tip(q), FAILED, sol.iterations, 1, eq.factorizations)
+    status = SOLVED if sol.success else ITERATION_LIMIT
+    return BackwardResult(eq.q, sol.u, eq.tip, status, sol.iterations, 1, eq.factorizations, eq.factorization)
