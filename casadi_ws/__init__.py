@@ -6,7 +6,7 @@ The package is layered; each sub-package imports only those listed before it:
 < ``io`` < ``cli``. The names below are the public API.
 """
 
-from .actuation import Actuator, Cable, trunk_cable
+from .actuation import Actuator, Cable, Cavity, trunk_cable
 from .control import FollowResult, ReachResult, ReachSettings, follow, reach
 from .fem import (TET4, ElementType, Material, Mesh, MeshError, StaticModel, box_mesh, load_mesh, point_function,
                   residual_function, trunk_mesh)
@@ -22,6 +22,7 @@ __all__ = [
     "Actuator",
     "BackwardSettings",
     "Cable",
+    "Cavity",
     "ElementType",
     "Equilibrium",
     "EquilibriumNLP",

@@ -38,6 +38,11 @@ def _load(path: str | None):
     return default_problem() if path is None else load_problem(path)
 
 
+def _u_unit(problem) -> str:
+    """The unit of u: N for cables, Pa for cavities, "N/Pa" (in input order) for a mix."""
+    return "/".join(dict.fromkeys(a.input_unit for a in problem.actuators)) or "N"
+
+
 def cmd_equilibrium(args) -> int:
     from .solvers.equilibrium import solve_equilibrium
     from .fem.model import StaticModel
@@ -46,7 +51,12 @@ def cmd_equilibrium(args) -> int:
     u = _parse_u(args.u, problem.n_u)
     model = StaticModel(problem)
     eq = solve_equilibrium(model, u)
-    out = {"problem": problem.name, **eq.to_dict(), "units": {"tip": "m", "u": "N"}}
+    states = model.actuator_states(eq.q)
+    actuators = [{"name": a.name, "kind": a.kind, "u": float(v), "u_unit": a.input_unit,
+                  a.quantity_name: float(st), f"{a.quantity_name}_unit": a.quantity_unit}
+                 for a, v, st in zip(problem.actuators, u, states)]
+    units = {"tip": "m", "u": _u_unit(problem)}
+    out = {"problem": problem.name, **eq.to_dict(), "actuators": actuators, "units": units}
     print(json.dumps(out, indent=None if args.compact else 2))
     return 0 if eq.converged else 1
 
@@ -89,8 +99,10 @@ def _print_finished(out: Path) -> int:
 def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
     """Result files plus the three-view and 3-D pictures into ``out``."""
     from .io.plots import three_views, workspace_3d
+    from .io.scene import write_scene
 
     result.save(out)
+    scene = write_scene(problem, out)
     three_views(result, out / "three_views.png", problem.mesh, title=f"{problem.name}: {result.method} workspace")
     workspace_3d(result, out / "workspace_3d.png", problem.mesh, title=f"{problem.name}: {result.method}")
     for w in result.warnings():
@@ -101,8 +113,8 @@ def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
         print(f"{result.method}: {s['n_points']} reachable points, {s['n_failed']} failed, {s['time_s']:.1f} s"
               + (f", {per_cell:.2f} LU factorisations per reached cell" if per_cell is not None else ""))
         extra = " cells.vtu" if (out / "cells.vtu").exists() else ""
-        print(f"wrote {out}/: summary.json points.csv failures.csv result.npz points.vtp{extra} (ParaView) "
-              f"three_views.png workspace_3d.png")
+        print(f"wrote {out}/: summary.json points.csv failures.csv result.npz points.vtp{extra} "
+              f"{' '.join(scene)} (ParaView) three_views.png workspace_3d.png")
 
 
 _SOLVE_DEFAULTS = {"method": "forward", "nd": 11, "step": 0.004, "strategy": "uniform", "backward": "reduced",
@@ -199,8 +211,9 @@ def cmd_reach(args) -> int:
     problem = _load(args.problem)
     target = _parse_point(args.target, "--target")
     r = reach(problem, target, settings=_reach_settings(args))
-    print(json.dumps({"problem": problem.name, "target": target.tolist(), **r.to_dict()},
-                     indent=None if args.compact else 2))
+    out = {"problem": problem.name, "target": target.tolist(), **r.to_dict()}
+    out["units"]["u"] = _u_unit(problem)
+    print(json.dumps(out, indent=None if args.compact else 2))
     return 0
 
 

@@ -124,8 +124,15 @@ def test_cli_solve_writes_files_and_refuses_to_overwrite(tmp_path):
     r = subprocess.run(cmd, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert r.stdout == ""  # quiet, and no solver chatter
-    for f in ("summary.json", "points.csv", "result.npz", "points.vtp", "three_views.png", "workspace_3d.png"):
+    for f in ("summary.json", "points.csv", "result.npz", "points.vtp", "three_views.png", "workspace_3d.png",
+              "robot.vtu", "actuators.vtu"):
         assert (out / f).is_file(), f
+    import meshio
+
+    robot, act = meshio.read(out / "robot.vtu"), meshio.read(out / "actuators.vtu")
+    assert robot.cells[0].type == "tetra" and robot.point_data["fixed"].any()
+    assert {c.type for c in act.cells} == {"line"}  # the two cables' segments
+    assert set(np.concatenate(act.cell_data["actuator"]).tolist()) == {0, 1}
     r = subprocess.run(cmd, capture_output=True, text=True)
     assert r.returncode == 2 and "--overwrite" in r.stderr
     r = subprocess.run(cmd[:-3] + ["--stride", "0", "--out", str(tmp_path / "s0")], capture_output=True, text=True)

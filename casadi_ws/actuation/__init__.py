@@ -1,6 +1,7 @@
-"""Actuation: the :class:`Actuator` interface and the actuator kinds (cables)."""
+"""Actuation: the :class:`Actuator` interface and the actuator kinds (cables, pressure cavities)."""
 
 from .base import Actuator, quantity_functions
 from .cable import Cable, trunk_cable
+from .cavity import Cavity, surface_volume
 
-__all__ = ["Actuator", "Cable", "quantity_functions", "trunk_cable"]
+__all__ = ["Actuator", "Cable", "Cavity", "quantity_functions", "surface_volume", "trunk_cable"]

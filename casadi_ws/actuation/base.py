@@ -64,8 +64,8 @@ def quantity_functions(actuator: Actuator) -> dict:
                                   ``hessian_sparsity``); the model stacks these of all actuators into one
                                   function, as one CasADi call costs more than the arithmetic
     ``hessian_sparsity``          the structural pattern of d2Q/dP2 that CasADi derives from Q
-    ``third``                     Function (P, mu) -> d2(mu . dQ/dP)/dP2, dense (3k x 3k): the
-                                  actuator's share of a Lagrangian Hessian
+    ``third``                     Function (P, mu) -> d2(mu . dQ/dP)/dP2 (3k x 3k, CasADi's sparsity):
+                                  the actuator's share of a Lagrangian Hessian
     """
     k = np.asarray(actuator.rest_points()).shape[0]
     P = ca.SX.sym("P", 3 * k)
@@ -78,5 +78,5 @@ def quantity_functions(actuator: Actuator) -> dict:
         "P": P, "Q": Q, "dQ": g,
         "d2Q": ca.vertcat(*H.nonzeros()) if H.nnz() else ca.SX.zeros(0, 1),
         "hessian_sparsity": H.sparsity(),
-        "third": ca.Function(f"{actuator.kind}_third", [P, mu], [ca.densify(T)], ["P", "mu"], ["T"]),
+        "third": ca.Function(f"{actuator.kind}_third", [P, mu], [T], ["P", "mu"], ["T"]),
     }

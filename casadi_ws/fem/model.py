@@ -47,10 +47,9 @@ class StaticModel:
         self.element = element = mesh.element
         self.n_nodes = mesh.n_nodes
         self.n_dof = 3 * mesh.n_nodes
-        fixed = np.zeros(mesh.n_nodes, dtype=bool)
-        fixed[np.asarray(problem.fixed_nodes, dtype=np.int64)] = True
-        self.fixed_nodes = np.flatnonzero(fixed)
-        self.free = np.flatnonzero(np.repeat(~fixed, 3))
+        fixed = problem.fixed_dofs()  # (n_nodes, 3)
+        self.fixed_nodes = np.flatnonzero(fixed.all(axis=1))
+        self.free = np.flatnonzero(~fixed.ravel())
         self.n_free = self.free.size
         self.X = mesh.nodes.reshape(-1).copy()
 
@@ -58,11 +57,16 @@ class StaticModel:
         mat = problem.material
         Xe = mesh.nodes[mesh.tets]
         w, G = element.rest_geometry(Xe)
-        mu, lam = mat.lame
+        # Lame parameters and density per element: the body's material, overridden in its regions
+        mu, lam = np.full(mesh.n_tets, mat.lame[0]), np.full(mesh.n_tets, mat.lame[1])
+        rho = np.full(mesh.n_tets, mat.density)
+        for tets, region in problem.regions:
+            mu[tets], lam[tets] = region.lame
+            rho[tets] = region.density
         nd = element.n_dof
         self._Xe = (Xe - Xe[:, :1]).reshape(-1, nd)  # element-local: see materials' note on round-off
         self._Ge = G.reshape(G.shape[0], -1)
-        self._Pe = np.column_stack([w, np.full(w.shape[0], mu), np.full(w.shape[0], lam)])
+        self._Pe = np.column_stack([w, mu, lam])
         funs = element_functions(mat.model, element, hessian=False)
         self.element_functions = funs
         self._force = ElementBatch(funs["force"], backend)
@@ -74,7 +78,7 @@ class StaticModel:
         F = np.zeros(self.n_dof)
         g = np.asarray(problem.gravity, dtype=float)
         if np.any(g):
-            weights = mat.density * element.body_load_weights(Xe)  # kg per node and element
+            weights = rho[:, None] * element.body_load_weights(Xe)  # kg per node and element
             for a in range(element.n_nodes):
                 np.add.at(F.reshape(-1, 3), mesh.tets[:, a], weights[:, a, None] * g[None, :])
         for point, force in problem.point_loads:
@@ -107,7 +111,7 @@ class StaticModel:
         Ps, Qs, gs, hs = [], [], [], []
         for a in self.actuators:
             pieces = quantity_functions(a)
-            W = embed(self.mesh, np.asarray(a.rest_points(), dtype=float)).matrix(self.mesh)
+            W = self._points_matrix(a)
             self._act.append(_ActuatorData(a, W, pieces["hessian_sparsity"], pieces["third"]))
             Ps.append(pieces["P"])
             Qs.append(pieces["Q"])
@@ -124,6 +128,15 @@ class StaticModel:
         h = ca.vertcat(*hs)
         self._actuators_qg = ca.Function("actuators", [P], [Q, g])
         self._actuators_qgh = ca.Function("actuators_h", [P], [Q, g, h])
+
+    def _points_matrix(self, actuator) -> sp.csr_matrix:
+        """W (3k x 3n): the actuator's points from the nodal positions; points that are mesh nodes
+        (``actuator.nodes``) follow them exactly, others are embedded in their host elements."""
+        nodes = getattr(actuator, "nodes", None)
+        if nodes is None:
+            return embed(self.mesh, np.asarray(actuator.rest_points(), dtype=float)).matrix(self.mesh)
+        cols = (3 * np.asarray(nodes, dtype=np.int64)[:, None] + np.arange(3)).ravel()
+        return sp.csr_matrix((np.ones(cols.size), (np.arange(cols.size), cols)), shape=(cols.size, self.n_dof))
 
     def actuator_terms(self, q: np.ndarray, hessians: bool = False):
         """Q (n_u,), dQ/dq (n_u, 3n) and, if asked, the nonzeros of every d2Q/dP2, stacked."""
@@ -153,20 +166,21 @@ class StaticModel:
         # pair of nonzeros of W whose rows meet in h_i's pattern adds h_i[r1, r2] w1 w2 to K[i1, i2]
         h_index, h_weight, h_act = [], [], []
         for i, d in enumerate(self._act):
-            Wf = d.W[:, self.free].tocoo()
-            k3 = d.W.shape[0]
-            sp_h = d.hessian_sparsity
-            nz = -np.ones((k3, k3), dtype=np.int64)  # nonzero index of each (row, col) of h_i, -1 if none
-            hr, hc = np.array(sp_h.get_triplet()[0], dtype=np.int64), np.array(sp_h.get_triplet()[1], dtype=np.int64)
-            nz[hr, hc] = np.arange(hr.size)
-            e1, e2 = np.meshgrid(np.arange(Wf.nnz), np.arange(Wf.nnz), indexing="ij")
-            e1, e2 = e1.ravel(), e2.ravel()
-            slot = nz[Wf.row[e1], Wf.row[e2]]
-            e1, e2, slot = e1[slot >= 0], e2[slot >= 0], slot[slot >= 0]
+            Wc = d.W[:, self.free].tocsr()
+            Wc.sort_indices()
+            hr, hc = (np.asarray(x, dtype=np.int64) for x in d.hessian_sparsity.get_triplet())
+            # nonzero s = (r1, r2) of h_i pairs every entry of W's row r1 with every entry of its row r2
+            count = np.diff(Wc.indptr)
+            n1, n2 = count[hr], count[hc]
+            tot = n1 * n2
+            slot = np.repeat(np.arange(hr.size), tot)
+            k = np.arange(tot.sum()) - np.repeat(np.cumsum(tot) - tot, tot)
+            e1 = np.repeat(Wc.indptr[hr], tot) + k // np.repeat(n2, tot)
+            e2 = np.repeat(Wc.indptr[hc], tot) + k % np.repeat(n2, tot)
             h_index.append(self._h_offsets[i] + slot)
-            h_weight.append(Wf.data[e1] * Wf.data[e2])
+            h_weight.append(Wc.data[e1] * Wc.data[e2])
             h_act.append(np.full(e1.size, i))
-            keys.append(Wf.col[e2].astype(np.int64) * self.n_free + Wf.col[e1])
+            keys.append(Wc.indices[e2].astype(np.int64) * self.n_free + Wc.indices[e1])
         ukey, slot = np.unique(np.concatenate(keys), return_inverse=True)
         # every element entry has a slot; those of fixed dofs go to one past the end, cut off after the
         # bincount (cheaper than gathering the kept ones on every assembly)
@@ -241,8 +255,8 @@ class StaticModel:
             P = d.W @ x
             mu = d.W @ lam_full
             Wf = d.W[:, self.free]
-            T = np.asarray(d.third(P, mu))
-            Hqq = Hqq + (-sa * ua) * (Wf.T @ sp.csr_matrix(T) @ Wf)
+            T = d.third(P, mu).sparse()
+            Hqq = Hqq + (-sa * ua) * (Wf.T @ T @ Wf)
             cols.append(-sa * (Wf.T @ (self._point_hessian(i, h) @ mu)))
         return Hqq, cols
 

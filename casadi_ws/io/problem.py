@@ -66,7 +66,8 @@ class Problem:
     fixed_nodes: np.ndarray
     """Indices of the nodes held fixed (zero displacement)."""
     actuators: list[Actuator]
-    """The actuators (cables); the input vector u holds their inputs in this order."""
+    """The actuators (cables, then cavities, in file order); the input vector u holds their inputs in this
+    order."""
     end_effector: np.ndarray
     """Rest position of the point of interest (3,), embedded in the mesh."""
     gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -78,6 +79,25 @@ class Problem:
     """Defaults for ``casadi-ws solve`` from the file's ``workspace`` section (method, n_d, step, ...)."""
     name: str = "problem"
     source: str = "<python>"
+    regions: list[tuple[np.ndarray, Material]] = field(default_factory=list)
+    """Parts of the body of another material: (tetrahedron indices, Material) pairs, later ones win; the
+    material model (law) is the body's, the constants are the region's (a strain-limiting layer)."""
+    partial_fixed: list[tuple[np.ndarray, tuple[int, ...]]] = field(default_factory=list)
+    """Further supports holding only some components of some nodes: (node indices, components 0/1/2)
+    pairs (SOFA's PartialFixedConstraint: symmetry planes, rollers)."""
+
+    def fixed_dofs(self) -> np.ndarray:
+        """Mask (n_nodes, 3) of the displacement components held at zero."""
+        mask = np.zeros((self.mesh.n_nodes, 3), dtype=bool)
+        mask[np.asarray(self.fixed_nodes, dtype=np.int64)] = True
+        for nodes, comps in self.partial_fixed:
+            mask[np.ix_(np.asarray(nodes, dtype=np.int64), list(comps))] = True
+        return mask
+
+    @property
+    def cavities(self) -> list:
+        """The actuators that are cavities, in input order."""
+        return [a for a in self.actuators if a.kind == "cavity"]
 
     @property
     def cables(self) -> list[Cable]:
@@ -114,13 +134,16 @@ def nodes_on_plane(mesh: Mesh, point, normal, tolerance: float = 1e-9) -> np.nda
 # YAML reading and validation
 # ---------------------------------------------------------------------------------------------------------
 
-_TOP_KEYS = {"name", "description", "mesh", "material", "gravity", "fixed", "cables", "end_effector",
-             "loads", "solver", "workspace"}
+_TOP_KEYS = {"name", "description", "mesh", "material", "material_regions", "gravity", "fixed", "cables",
+             "cavities", "end_effector", "loads", "solver", "workspace"}
 _MESH_GEN = {"generate", "length", "radius_base", "radius_tip", "resolution", "size", "divisions", "origin",
              "order"}
 _MESH_FILE = {"file", "scale", "units", "order"}
 _MATERIAL = {"model", "young_modulus", "poisson_ratio", "density"}
+_REGION = {"box", "young_modulus", "poisson_ratio", "density"}
 _CABLE = {"name", "points", "pull_point", "trunk_routing", "u_min", "u_max"}
+_CAVITY = {"name", "surface", "enclosing", "u_min", "u_max", "scale"}
+_COMPONENTS = {"x": 0, "y": 1, "z": 2}
 _ROUTING = {"angle_deg", "kind", "radius", "taper", "z_start", "z_end", "spacing"}
 _SOLVER = {"tolerance", "max_iterations", "max_load_steps", "newton"}
 _WORKSPACE = {"method", "n_d", "step", "strategy", "backward", "workers"}
@@ -268,35 +291,108 @@ def _check_size(r: _Reader, key: str, n_tets: float) -> None:
         r.fail(key, f"would generate {n_tets:.3g} tetrahedra, more than {MAX_GENERATED_TETS:.0e}")
 
 
-def _read_fixed(r: _Reader, d, mesh: Mesh) -> np.ndarray:
+def _read_fixed(r: _Reader, d, mesh: Mesh):
+    """``fixed``: one selection or a list of them; each a box or a plane, optionally with ``components``.
+    Returns (fully fixed nodes, [(nodes, components)])."""
+    if isinstance(d, list):
+        if not d:
+            r.fail("fixed", "expected a selection or a non-empty list of selections")
+        parts = [_read_selection(r, s, mesh, f"fixed[{i}]") for i, s in enumerate(d)]
+    else:
+        parts = [_read_selection(r, d, mesh, "fixed")]
+    full = np.unique(np.concatenate([n for n, c in parts if c == (0, 1, 2)] + [np.zeros(0, dtype=np.int64)]))
+    partial = [(n, c) for n, c in parts if c != (0, 1, 2)]
+    # rigid motions are prevented only if no infinitesimal rigid motion leaves every fixed component at 0
+    rows = []
+    for nodes, comps in [(full, (0, 1, 2))] + partial:
+        x = mesh.nodes[nodes] - mesh.nodes.mean(0)
+        for c in comps:
+            modes = np.zeros((len(nodes), 6))
+            modes[:, c] = 1.0
+            # rotation about axis a moves component c by (e_a x x)_c
+            for a in range(3):
+                modes[:, 3 + a] = np.cross(np.eye(3)[a], x)[:, c]
+            rows.append(modes)
+    M = np.vstack(rows) if rows else np.zeros((0, 6))
+    scale = mesh.characteristic_length()
+    M[:, 3:] /= scale
+    if M.shape[0] < 6 or np.linalg.svd(M, compute_uv=False)[5] <= 1e-6 * np.sqrt(max(len(M), 1)):
+        key = "fixed" if not isinstance(d, list) else "fixed"
+        r.fail(key, f"the supports ({full.size} fully fixed node(s), {len(partial)} partial selection(s)) do "
+                    f"not prevent rigid motion")
+    return full, partial
+
+
+def _read_selection(r: _Reader, d, mesh: Mesh, key: str):
+    if isinstance(d, dict) and "components" in d:
+        comps_raw = d["components"]
+        d = {k: v for k, v in d.items() if k != "components"}
+        if not isinstance(comps_raw, list) or not comps_raw or any(c not in _COMPONENTS for c in comps_raw):
+            r.fail(f"{key}.components", f"expected a non-empty list of x, y, z, got {comps_raw!r}")
+        comps = tuple(sorted({_COMPONENTS[c] for c in comps_raw}))
+    else:
+        comps = (0, 1, 2)
     if not isinstance(d, dict) or len(d) != 1 or next(iter(d)) not in ("box", "plane"):
-        r.fail("fixed", f"expected exactly one of 'box: [[xmin, ymin, zmin], [xmax, ymax, zmax]]' or "
-                        f"'plane: {{point, normal, tolerance}}', got {d!r}")
+        r.fail(key, f"expected exactly one of 'box: [[xmin, ymin, zmin], [xmax, ymax, zmax]]' or "
+                    f"'plane: {{point, normal, tolerance}}' (and optionally 'components'), got {d!r}")
     if "box" in d:
         b = d["box"]
         if not isinstance(b, (list, tuple)) or len(b) != 2:
-            r.fail("fixed.box", f"expected [[xmin, ymin, zmin], [xmax, ymax, zmax]], got {b!r}")
-        lo, hi = r.vector(b[0], "fixed.box[0]"), r.vector(b[1], "fixed.box[1]")
+            r.fail(f"{key}.box", f"expected [[xmin, ymin, zmin], [xmax, ymax, zmax]], got {b!r}")
+        lo, hi = r.vector(b[0], f"{key}.box[0]"), r.vector(b[1], f"{key}.box[1]")
         if np.any(lo > hi):
-            r.fail("fixed.box", f"lower corner {lo.tolist()} exceeds upper corner {hi.tolist()}")
-        nodes, key = nodes_in_box(mesh, lo, hi), "fixed.box"
+            r.fail(f"{key}.box", f"lower corner {lo.tolist()} exceeds upper corner {hi.tolist()}")
+        nodes, key = nodes_in_box(mesh, lo, hi), f"{key}.box"
     else:
-        p = r.mapping(d["plane"], "fixed.plane", {"point", "normal", "tolerance"})
-        point = r.vector(p.get("point"), "fixed.plane.point")
-        normal = r.vector(p.get("normal"), "fixed.plane.normal")
+        p = r.mapping(d["plane"], f"{key}.plane", {"point", "normal", "tolerance"})
+        point = r.vector(p.get("point"), f"{key}.plane.point")
+        normal = r.vector(p.get("normal"), f"{key}.plane.normal")
         if np.linalg.norm(normal) == 0:
-            r.fail("fixed.plane.normal", "must not be the zero vector")
-        tol = r.number(p, "tolerance", "fixed.plane", 1e-6 * mesh.characteristic_length(), lo=0.0)
-        nodes, key = nodes_on_plane(mesh, point, normal, tol), "fixed.plane"
+            r.fail(f"{key}.plane.normal", "must not be the zero vector")
+        tol = r.number(p, "tolerance", f"{key}.plane", 1e-6 * mesh.characteristic_length(), lo=0.0)
+        nodes, key = nodes_on_plane(mesh, point, normal, tol), f"{key}.plane"
     if nodes.size == 0:
         lo, hi = mesh.nodes.min(0), mesh.nodes.max(0)
         r.fail(key, f"selects no node (mesh spans {np.round(lo, 6).tolist()} to {np.round(hi, 6).tolist()} m)")
-    # rigid motions are prevented only by three fixed nodes that are not collinear
-    x = mesh.nodes[nodes] - mesh.nodes[nodes].mean(0)
-    sv = np.linalg.svd(x, compute_uv=False) if nodes.size >= 3 else np.zeros(2)
-    if nodes.size < 3 or sv[1] <= 1e-6 * mesh.characteristic_length():
-        r.fail(key, f"selects {nodes.size} node(s) on a line or fewer: they do not prevent rigid motion")
-    return nodes
+    if comps == (0, 1, 2):
+        # a single clamp: three nodes that are not collinear
+        x = mesh.nodes[nodes] - mesh.nodes[nodes].mean(0)
+        sv = np.linalg.svd(x, compute_uv=False) if nodes.size >= 3 else np.zeros(2)
+        if key.startswith("fixed.") and (nodes.size < 3 or sv[1] <= 1e-6 * mesh.characteristic_length()):
+            r.fail(key, f"selects {nodes.size} node(s) on a line or fewer: they do not prevent rigid motion")
+    return nodes, comps
+
+
+def _read_cavities(r: _Reader, lst, mesh: Mesh, base: Path) -> list:
+    from .cavities import cavity_enclosing, cavity_from_surface
+
+    if not isinstance(lst, list) or not lst:
+        r.fail("cavities", "expected a non-empty list of cavities")
+    out = []
+    for i, c in enumerate(lst):
+        key = f"cavities[{i}]"
+        r.mapping(c, key, _CAVITY)
+        name = str(c.get("name", f"cavity{i + 1}"))
+        u_min = r.number(c, "u_min", key, 0.0)
+        u_max = r.number(c, "u_max", key)
+        if u_min > u_max:
+            r.fail(f"{key}.u_min", f"lower bound {u_min} Pa exceeds upper bound u_max = {u_max} Pa")
+        if ("surface" in c) == ("enclosing" in c):
+            r.fail(key, "give exactly one of 'surface: FILE' or 'enclosing: [x, y, z]'")
+        try:
+            if "surface" in c:
+                path = base / str(c["surface"])
+                if not path.is_file():
+                    r.fail(f"{key}.surface", f"file not found: {path}")
+                scale = r.number(c, "scale", key, 1.0, lo=0.0, lo_open=True)
+                cav = cavity_from_surface(mesh, path, name, u_min, u_max, scale)
+                where = f"{key}.surface"
+            else:
+                cav = cavity_enclosing(mesh, r.vector(c["enclosing"], f"{key}.enclosing"), name, u_min, u_max)
+        except ValueError as exc:
+            r.fail(f"{key}.surface" if "surface" in c else f"{key}.enclosing", str(exc))
+        out.append(cav)
+    return out
 
 
 def _read_cables(r: _Reader, lst, mesh: Mesh) -> list[Cable]:
@@ -354,9 +450,11 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     if not isinstance(d, dict):
         r.fail("", f"expected a mapping at the top level, got {type(d).__name__}")
     r.mapping(d, "", _TOP_KEYS)
-    for k in ("mesh", "material", "fixed", "cables"):
+    for k in ("mesh", "material", "fixed"):
         if k not in d:
             r.fail(k, "missing (required)")
+    if "cables" not in d and "cavities" not in d:
+        r.fail("cables", "missing: a problem needs cables, cavities or both")
     mesh, _ = _read_mesh(r, d["mesh"], base)
 
     m = r.mapping(d["material"], "material", _MATERIAL)
@@ -369,9 +467,30 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
                         r.number(m, "young_modulus", "material", lo=0.0, lo_open=True),
                         r.number(m, "poisson_ratio", "material", lo=-1.0, hi=0.5, lo_open=True, hi_open=True),
                         r.number(m, "density", "material", 1000.0, lo=0.0))
+    regions = []
+    lst = d.get("material_regions") or []
+    if not isinstance(lst, list):
+        r.fail("material_regions", "expected a list of {box, young_modulus, poisson_ratio, density}")
+    centroids = mesh.nodes[mesh.corners].mean(axis=1)
+    for i, g in enumerate(lst):
+        key = f"material_regions[{i}]"
+        r.mapping(g, key, _REGION)
+        b = g.get("box")
+        if not isinstance(b, (list, tuple)) or len(b) != 2:
+            r.fail(f"{key}.box", f"expected [[xmin, ymin, zmin], [xmax, ymax, zmax]], got {b!r}")
+        lo, hi = r.vector(b[0], f"{key}.box[0]"), r.vector(b[1], f"{key}.box[1]")
+        tets = np.flatnonzero(np.all((centroids >= lo) & (centroids <= hi), axis=1))
+        if tets.size == 0:
+            r.fail(f"{key}.box", "holds the centroid of no tetrahedron")
+        regions.append((tets, Material(model,
+                                       r.number(g, "young_modulus", key, material.young_modulus, lo=0.0, lo_open=True),
+                                       r.number(g, "poisson_ratio", key, material.poisson_ratio, lo=-1.0, hi=0.5,
+                                                lo_open=True, hi_open=True),
+                                       r.number(g, "density", key, material.density, lo=0.0))))
     gravity = r.vector(d["gravity"], "gravity") if d.get("gravity") is not None else np.zeros(3)
-    fixed = _read_fixed(r, d["fixed"], mesh)
-    cables = _read_cables(r, d["cables"], mesh)
+    fixed, partial_fixed = _read_fixed(r, d["fixed"], mesh)
+    cables = _read_cables(r, d["cables"], mesh) if "cables" in d else []
+    cavities = _read_cavities(r, d["cavities"], mesh, base) if "cavities" in d else []
 
     ee = d.get("end_effector", "tip")
     if ee == "tip":
@@ -416,7 +535,8 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     if "workers" in w:
         workspace["workers"] = r.number(w, "workers", "workspace", lo=1, integer=True)
     name = str(d.get("name", Path(source).stem))
-    return Problem(mesh, material, fixed, cables, end_effector, gravity, loads, solver, workspace, name, source)
+    return Problem(mesh, material, fixed, cables + cavities, end_effector, gravity, loads, solver, workspace, name,
+                   source, regions, partial_fixed)
 
 
 def load_problem(path: str | Path) -> Problem:

@@ -1,0 +1,93 @@
+"""Cavities of a problem file: from a closed triangle surface file, or the inner boundary enclosing a point.
+
+Both return a :class:`casadi_ws.actuation.Cavity` whose vertices are mesh nodes and whose triangles are
+oriented with normals out of the cavity; bad input raises ``ValueError`` with the one-line reason (the
+problem reader adds the file and key).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..actuation.cavity import Cavity, surface_volume
+from ..fem.mesh import embed
+from ..fem.surface import boundary_faces, components, edge_report, reverse, winding_number
+
+__all__ = ["cavity_enclosing", "cavity_from_surface", "inner_boundaries"]
+
+
+def _compact(mesh, faces, name, u_min, u_max) -> Cavity:
+    nodes, local = np.unique(faces, return_inverse=True)
+    return Cavity(mesh.nodes[nodes], local.reshape(faces.shape), nodes, u_min, u_max, name)
+
+
+def inner_boundaries(mesh) -> list[np.ndarray]:
+    """The closed inner boundaries of the mesh (walls of chambers), each as faces oriented out of the
+    cavity, i.e. into the solid. The outer boundary is the component enclosing the largest volume."""
+    faces = boundary_faces(mesh)
+    comps = [faces[c] for c in components(faces)]
+    if len(comps) <= 1:
+        return []
+    # with solid-outward normals the outer boundary encloses a positive volume, inner ones negative
+    vols = [float(surface_volume(mesh.nodes, f[:, :3])) for f in comps]
+    outer = int(np.argmax(vols))
+    return [reverse(f) for i, f in enumerate(comps) if i != outer]
+
+
+def cavity_enclosing(mesh, point, name="cavity", u_min=0.0, u_max=1e4) -> Cavity:
+    """The closed inner boundary of the mesh that encloses ``point``."""
+    point = np.asarray(point, dtype=float)
+    inner = inner_boundaries(mesh)
+    for faces in inner:
+        if winding_number(mesh.nodes, faces, point) > 0.5:
+            return _compact(mesh, faces, name, u_min, u_max)
+    if embed(mesh, point[None]).outside[0] == 0.0:
+        raise ValueError(f"point {point.tolist()} lies inside the solid, not in a cavity")
+    raise ValueError(f"point {point.tolist()} lies in none of the mesh's {len(inner)} closed inner "
+                     f"boundaries (cavities)")
+
+
+def cavity_from_surface(mesh, path: Path, name="cavity", u_min=0.0, u_max=1e4, scale: float = 1.0) -> Cavity:
+    """A cavity from a closed triangle surface file whose vertices are mesh nodes (``scale`` converts its
+    units to metres). An inverted but consistently oriented surface is turned around."""
+    import meshio
+
+    try:
+        m = meshio.read(path)
+    except Exception as exc:  # meshio raises many kinds  # noqa: BLE001
+        raise ValueError(f"cannot read surface file {path}: {exc}") from None
+    tris = [c.data for c in m.cells if c.type in ("triangle", "triangle6")]
+    if not tris:
+        raise ValueError(f"{path} holds no triangles (cell types: {sorted({c.type for c in m.cells})})")
+    if len({t.shape[1] for t in tris}) > 1:
+        raise ValueError(f"{path} mixes 3- and 6-node triangles")
+    faces = np.concatenate(tris).astype(np.int64)
+    X = np.asarray(m.points, dtype=float)[:, :3] * scale
+    used = np.unique(faces)
+    # vertices must coincide with mesh nodes (to a millionth of the mesh's size)
+    from scipy.spatial import cKDTree
+
+    dist, node = cKDTree(mesh.nodes).query(X[used])
+    tol = 1e-6 * mesh.characteristic_length()
+    off = dist > tol
+    if off.any():
+        raise ValueError(f"{int(off.sum())} of its {used.size} vertices are not mesh nodes (worst "
+                         f"{dist.max():.3g} m from the nearest node; allowed {tol:.2g} m)")
+    to_node = np.full(len(X), -1, dtype=np.int64)
+    to_node[used] = node
+    faces = to_node[faces]
+    if faces.shape[1] == 6 and mesh.tets.shape[1] != 10:
+        raise ValueError("6-node triangles need a mesh of 10-node tetrahedra (mesh.order: 2)")
+    if faces.shape[1] == 3 and mesh.tets.shape[1] == 10:
+        raise ValueError("a mesh of 10-node tetrahedra needs a surface of 6-node triangles (triangle6)")
+    open_edges, same = edge_report(faces)
+    if open_edges:
+        raise ValueError(f"the surface is not closed: {open_edges} edge(s) not shared by exactly two triangles")
+    if same:
+        raise ValueError(f"the surface is not consistently oriented: {same} edge(s) run the same way in both "
+                         f"of their triangles")
+    if surface_volume(mesh.nodes, faces) < 0:  # closed and consistent, but normals point into the cavity
+        faces = reverse(faces)
+    return _compact(mesh, faces, name, u_min, u_max)
