@@ -105,16 +105,21 @@ def _elastica_tip(PL2_EI: float) -> np.ndarray:
     return sol.y[2:, -1]
 
 
-def _elastica(n, PL2_EI, model, order):
+def elastica_case(n, PL2_EI, model, order):
+    """A square cantilever (L/h = 10, nu = 0) under a dead tip load P L^2 / EI, and its exact tip."""
     E, L, slender = 1e6, 0.2, 10
     h = L / slender
     P = PL2_EI * E * h**4 / 12 / L**2
     pb = cantilever(n=n, slender=slender, model=model, nu=0.0, E=E, L=L, order=order)
     pb.point_loads = _tip_loads(pb, [P, 0.0, 0.0])
+    x, z = _elastica_tip(PL2_EI) * L
+    return pb, np.array([x, 0.0, z])
+
+
+def _elastica(n, PL2_EI, model, order):
+    pb, exact = elastica_case(n, PL2_EI, model, order)
     eq = solve_equilibrium(StaticModel(pb), np.zeros(0))
     assert eq.converged, eq.status_name
-    x, z = _elastica_tip(PL2_EI) * L
-    exact = np.array([x, 0.0, z])
     return np.linalg.norm(eq.tip - exact) / np.linalg.norm(exact - pb.end_effector)
 
 
