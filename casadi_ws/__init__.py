@@ -15,8 +15,8 @@ from .runtime import Executor, ProcessExecutor, SerialExecutor
 from .nlp import EquilibriumNLP, NLPSolution, tracking
 from .solvers import Equilibrium, equilibrium_function, solve_equilibrium
 from .status import Status
-from .workspace import (BackwardSettings, FBSettings, ForwardSettings, WorkspaceResult, compare, forward,
-                        forward_backward, load_result)
+from .workspace import (BackwardSettings, FBSettings, ForwardSettings, Task, WorkspaceResult, compare, forward,
+                        forward_backward, load_result, measures)
 
 __all__ = [
     "Actuator",
@@ -44,6 +44,7 @@ __all__ = [
     "StaticModel",
     "Status",
     "TET4",
+    "Task",
     "WorkspaceResult",
     "box_mesh",
     "compare",
@@ -55,6 +56,7 @@ __all__ = [
     "load_mesh",
     "load_problem",
     "load_result",
+    "measures",
     "point_function",
     "problem_from_dict",
     "reach",

@@ -121,6 +121,28 @@ _SOLVE_DEFAULTS = {"method": "forward", "nd": 11, "step": 0.004, "strategy": "un
                    "workers": 1}
 
 
+def _task(args, problem):
+    """The task region: --task-box or --task-points, else the problem file's ``task``."""
+    from .workspace.measures import read_task
+
+    if args.task_box is not None and args.task_points is not None:
+        raise UsageError("--task-box, --task-points: give one of them")
+    try:
+        if args.task_box is not None:
+            v = [float(x) for x in args.task_box.split(",")]
+            if len(v) != 6:
+                raise ValueError(f"expected xmin,ymin,zmin,xmax,ymax,zmax, got {args.task_box!r}")
+            return read_task(box=[v[:3], v[3:]])
+        if args.task_points is not None:
+            if not Path(args.task_points).is_file():
+                raise ValueError(f"file not found: {args.task_points}")
+            return read_task(csv=args.task_points)
+    except ValueError as exc:
+        flag = "--task-box" if args.task_box is not None else "--task-points"
+        raise UsageError(f"{flag}: {exc}") from None
+    return problem.task
+
+
 def cmd_solve(args) -> int:
     problem = _load(args.problem)
     for key, default in _SOLVE_DEFAULTS.items():  # command line, else the file's workspace section, else default
@@ -128,6 +150,7 @@ def cmd_solve(args) -> int:
             setattr(args, key, problem.workspace.get(key, default))
     if args.workers < 1:
         raise UsageError(f"--workers: expected an integer >= 1, got {args.workers}")
+    task = _task(args, problem)
     if args.method == "forward":
         from .workspace.forward import ForwardSettings, forward
 
@@ -164,6 +187,9 @@ def cmd_solve(args) -> int:
         print(f"casadi-ws: interrupted; the checkpoint in {out} continues with the same command and --resume",
               file=sys.stderr)
         return 130
+    from .workspace.measures import measures
+
+    result.measures = measures(result, step=args.step, task=task)
     write_outputs(result, problem, out, args.quiet)
     return 0
 
@@ -296,6 +322,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "keeps what was verified and --resume with a larger budget continues (200000)")
     s.add_argument("--force", action="store_true", help="forward: run even more than 10^8 equilibria")
     s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    s.add_argument("--task-box", default=None, metavar="X0,Y0,Z0,X1,Y1,Z1",
+                   help="a task region (m): summary.json reports the share of it the workspace reaches")
+    s.add_argument("--task-points", default=None, metavar="CSV", help="task points x,y,z (m), instead of a box")
     s.set_defaults(func=cmd_solve)
 
     for name, helptext in (("reach", "cable tensions that bring the tip to a target (inverse model)"),

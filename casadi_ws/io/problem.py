@@ -82,6 +82,8 @@ class Problem:
     regions: list[tuple[np.ndarray, Material]] = field(default_factory=list)
     """Parts of the body of another material: (tetrahedron indices, Material) pairs, later ones win; the
     material model (law) is the body's, the constants are the region's (a strain-limiting layer)."""
+    task: object = None
+    """A region the robot should reach (:class:`casadi_ws.workspace.measures.Task`), or None."""
     partial_fixed: list[tuple[np.ndarray, tuple[int, ...]]] = field(default_factory=list)
     """Further supports holding only some components of some nodes: (node indices, components 0/1/2)
     pairs (SOFA's PartialFixedConstraint: symmetry planes, rollers)."""
@@ -135,7 +137,7 @@ def nodes_on_plane(mesh: Mesh, point, normal, tolerance: float = 1e-9) -> np.nda
 # ---------------------------------------------------------------------------------------------------------
 
 _TOP_KEYS = {"name", "description", "mesh", "material", "material_regions", "gravity", "fixed", "cables",
-             "cavities", "end_effector", "loads", "solver", "workspace"}
+             "cavities", "end_effector", "loads", "solver", "workspace", "task"}
 _MESH_GEN = {"generate", "length", "radius_base", "radius_tip", "resolution", "size", "divisions", "origin",
              "order"}
 _MESH_FILE = {"file", "scale", "units", "order"}
@@ -534,9 +536,26 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
             workspace[key] = w[key]
     if "workers" in w:
         workspace["workers"] = r.number(w, "workers", "workspace", lo=1, integer=True)
+    task = None
+    if d.get("task") is not None:
+        from ..workspace.measures import read_task
+
+        t = r.mapping(d["task"], "task", {"box", "points"})
+        if len(t) != 1:
+            r.fail("task", "expected exactly one of 'box: [[xmin, ymin, zmin], [xmax, ymax, zmax]]' or 'points: FILE.csv'")
+        try:
+            if "box" in t:
+                task = read_task(box=t["box"])
+            else:
+                path = base / str(t["points"])
+                if not path.is_file():
+                    r.fail("task.points", f"file not found: {path}")
+                task = read_task(csv=path)
+        except (ValueError, TypeError) as exc:
+            r.fail(f"task.{next(iter(t))}", str(exc))
     name = str(d.get("name", Path(source).stem))
     return Problem(mesh, material, fixed, cables + cavities, end_effector, gravity, loads, solver, workspace, name,
-                   source, regions, partial_fixed)
+                   source, regions, task, partial_fixed)
 
 
 def load_problem(path: str | Path) -> Problem:

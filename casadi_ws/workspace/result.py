@@ -56,6 +56,8 @@ class WorkspaceResult:
     """End-effector position at rest (u = 0, no load), metres."""
     arrays: dict = field(default_factory=dict)
     """Further method-specific arrays (e.g. the forward-backward cells), saved in result.npz."""
+    measures: dict = field(default_factory=dict)
+    """Volume, area, extents, task share (:func:`casadi_ws.workspace.measures.measures`), if computed."""
 
     @property
     def n_points(self) -> int:
@@ -93,7 +95,10 @@ class WorkspaceResult:
             "rest_tip": self.rest_tip.tolist(),
             "bounding_box": ([self.points.min(0).tolist(), self.points.max(0).tolist()]
                              if self.n_points else None),
-            "units": {"points": "m", "u": "N", "time_s": "s"},
+            "measures": self.measures,
+            "units": {"points": "m", "u": "/".join(dict.fromkeys(a.get("unit", "N") for a in
+                                                                  self.problem.get("actuators", []))) or "N",
+                      "time_s": "s", "volume": "m^3", "area": "m^2"},
         }
 
     def save(self, directory: str | Path) -> Path:
@@ -161,7 +166,8 @@ def load_result(directory: str | Path) -> WorkspaceResult:
         failed_status=a["failed_status"], failed_residual=a["failed_residual"], states=a.get("states"),
         counters=summary["counters"], timings=summary["timings"], settings=summary["settings"],
         problem=summary["problem"], rest_tip=a["rest_tip"],
-        arrays={k[len("extra_"):]: v for k, v in a.items() if k.startswith("extra_")})
+        arrays={k[len("extra_"):]: v for k, v in a.items() if k.startswith("extra_")},
+        measures=summary.get("measures") or {})
 
 
 def describe(problem, model) -> dict:

@@ -1,0 +1,72 @@
+"""Workspace measures (issue: design studies): volume, area, extents and task share, against exact values."""
+
+import json
+
+import numpy as np
+import pytest
+from conftest import REPO
+
+from casadi_ws import (Cable, ForwardSettings, Material, Problem, StaticModel, Task, WorkspaceResult, box_mesh,
+                       forward, measures, solve_equilibrium)
+from casadi_ws.io.problem import nodes_on_plane
+from casadi_ws.solvers.equilibrium import tangent_factorization
+from casadi_ws.solvers.sensitivity import sensitivity
+
+
+def test_cell_volume_of_a_ball_is_within_a_cell_layer_of_the_exact_one():
+    rng = np.random.default_rng(0)
+    r, s = 0.02, 0.002
+    p = rng.normal(size=(400000, 3))
+    p = r * p / np.linalg.norm(p, axis=1, keepdims=True) * rng.uniform(0, 1, (len(p), 1)) ** (1 / 3)
+    res = WorkspaceResult("forward", p, np.zeros((len(p), 3)))
+    m = measures(res, step=s, origin=np.zeros(3))
+    exact = 4 / 3 * np.pi * r**3
+    # the occupied cells cover the ball and lie within sqrt(3) s/2 of it
+    assert exact * 0.99 < m["volume"] < 4 / 3 * np.pi * (r + np.sqrt(3) * s / 2) ** 3
+    np.testing.assert_allclose(m["extents"], [[-r, -r, -r], [r, r, r]], atol=2e-4)
+    # a task box half inside the ball: about half of its cells are reached
+    t = measures(res, step=s, origin=np.zeros(3), task=Task(box=[[0.0, -0.004, -0.004], [0.04, 0.004, 0.004]]))
+    assert t["task_cells"] == 21 * 5 * 5 and 0.45 < t["task_share"] < 0.6
+
+
+def two_cable_plate():
+    """A linear-elastic cantilever plate with two cables: at small tensions the tip moves as A u."""
+    L = 0.1
+    mesh = box_mesh((0.02, 0.02, L), (3, 3, 12), (-0.01, -0.01, 0.0))
+    z = np.linspace(0.01, L, 10)
+    cables = [Cable(np.column_stack([np.full_like(z, 0.006), np.zeros_like(z), z]), np.array([0.006, 0, 0]),
+                    0.0, 0.005, "x"),
+              Cable(np.column_stack([np.zeros_like(z), np.full_like(z, 0.006), z]), np.array([0, 0.006, 0]),
+                    0.0, 0.005, "y")]
+    return Problem(mesh, Material("linear", 1e6, 0.3), nodes_on_plane(mesh, [0, 0, 0], [0, 0, 1]), cables,
+                   np.array([0.0, 0.0, L]), name="plate")
+
+
+def test_area_of_a_linear_two_cable_workspace_is_the_parallelogram():
+    pb = two_cable_plate()
+    m = StaticModel(pb)
+    fw = forward(pb, settings=ForwardSettings(n_d=6, progress=False), model=m)
+    eq = solve_equilibrium(m, [0.0, 0.0])
+    A, _ = sensitivity(m, eq.q, tangent_factorization(m, eq.q, eq.u))
+    exact = np.linalg.norm(np.cross(A[:, 0], A[:, 1])) * 0.005 * 0.005
+    got = measures(fw, step=1e-6)["area"]
+    # the tensions soften the plate (geometric stiffness, ~T L^2 / EI = 0.4 %): nearly linear
+    assert abs(got - exact) / exact < 0.01
+
+
+def test_solve_reports_measures_and_task_share(tmp_path):
+    import subprocess
+    import sys
+
+    text = (REPO / "problems" / "trunk_2cables.yaml").read_text().replace("resolution: 1.0", "resolution: 0.5")
+    text += "task:\n  box: [[0.0, 0.0, 0.15], [0.02, 0.02, 0.2]]\n"
+    (tmp_path / "t.yaml").write_text(text)
+    r = subprocess.run([sys.executable, "-m", "casadi_ws.cli", "solve", str(tmp_path / "t.yaml"), "--nd", "5",
+                        "--out", str(tmp_path / "o"), "--quiet"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())["measures"]
+    assert s["cells"] > 0 and s["area"] > 0 and s["task"] == {"box": [[0.0, 0.0, 0.15], [0.02, 0.02, 0.2]]}
+    assert 0 < s["task_share"] < 1
+    r = subprocess.run([sys.executable, "-m", "casadi_ws.cli", "solve", str(tmp_path / "t.yaml"), "--nd", "2",
+                        "--out", str(tmp_path / "p"), "--task-box", "1,2,3"], capture_output=True, text=True)
+    assert r.returncode == 2 and "--task-box: expected xmin,ymin,zmin,xmax,ymax,zmax" in r.stderr
