@@ -11,7 +11,7 @@ from .control import FollowResult, ReachResult, ReachSettings, follow, reach
 from .fem import (TET4, ElementType, Material, Mesh, MeshError, StaticModel, box_mesh, load_mesh, point_function,
                   residual_function, trunk_mesh)
 from .io import Problem, ProblemError, SolverSettings, default_problem, load_problem, problem_from_dict
-from .runtime import Executor, ProcessExecutor, SerialExecutor
+from .runtime import DaskExecutor, Executor, ProcessExecutor, SerialExecutor
 from .nlp import EquilibriumNLP, NLPSolution, tracking
 from .solvers import Equilibrium, equilibrium_function, solve_equilibrium
 from .status import Status
@@ -24,6 +24,7 @@ __all__ = [
     "Cable",
     "Cavity",
     "ElementType",
+    "DaskExecutor",
     "Equilibrium",
     "EquilibriumNLP",
     "Executor",

@@ -143,6 +143,22 @@ def _task(args, problem):
     return problem.task
 
 
+def _executor(args, problem):
+    """A Dask client for --scheduler, else None (the method starts its own workers)."""
+    if not args.scheduler:
+        return None
+    from .runtime.executor import DaskExecutor, SchedulerError
+
+    try:
+        ex = DaskExecutor(args.scheduler, problem=problem, timeout=5.0)
+    except SchedulerError as exc:
+        raise UsageError(f"--scheduler: {exc}") from None
+    if not args.quiet:
+        print(f"casadi-ws: Dask cluster at {args.scheduler}: {ex.workers} worker(s), dashboard {ex.dashboard}",
+              file=sys.stderr)
+    return ex
+
+
 def cmd_solve(args) -> int:
     problem = _load(args.problem)
     for key, default in _SOLVE_DEFAULTS.items():  # command line, else the file's workspace section, else default
@@ -165,7 +181,8 @@ def cmd_solve(args) -> int:
         settings = ForwardSettings(n_d=args.nd, workers=args.workers, progress=not args.quiet,
                                    store_states=args.store_states, checkpoint_every=args.checkpoint_every,
                                    stride=args.stride)
-        run = lambda: forward(problem, settings=settings, checkpoint_dir=out, resume=mode == "resume")  # noqa: E731
+        run = lambda: forward(problem, settings=settings, checkpoint_dir=out, resume=mode == "resume",  # noqa: E731
+                              executor=executor)
     else:
         from .workspace.backward import BackwardSettings
         from .workspace.forward_backward import FBSettings, forward_backward
@@ -178,15 +195,20 @@ def cmd_solve(args) -> int:
         settings = FBSettings(step=args.step, strategy=args.strategy, progress=not args.quiet,
                               backward=BackwardSettings(formulation=args.backward), store_states=args.store_states,
                               workers=args.workers, max_cells=args.max_cells)
-        run = lambda: forward_backward(problem, settings, checkpoint_dir=out, resume=mode == "resume")  # noqa: E731
+        run = lambda: forward_backward(problem, settings, checkpoint_dir=out, resume=mode == "resume",  # noqa: E731
+                                       executor=executor)
     if mode == "done":
         return _print_finished(out)
+    executor = _executor(args, problem)
     try:
         result = run()
     except KeyboardInterrupt:
         print(f"casadi-ws: interrupted; the checkpoint in {out} continues with the same command and --resume",
               file=sys.stderr)
         return 130
+    finally:
+        if executor is not None:
+            executor.close()
     from .workspace.measures import measures
 
     result.measures = measures(result, step=args.step, task=task)
@@ -322,6 +344,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "keeps what was verified and --resume with a larger budget continues (200000)")
     s.add_argument("--force", action="store_true", help="forward: run even more than 10^8 equilibria")
     s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on an existing Dask cluster (e.g. tcp://host:8786; workers with --nthreads 1)")
     s.add_argument("--task-box", default=None, metavar="X0,Y0,Z0,X1,Y1,Z1",
                    help="a task region (m): summary.json reports the share of it the workspace reaches")
     s.add_argument("--task-points", default=None, metavar="CSV", help="task points x,y,z (m), instead of a box")

@@ -1,6 +1,7 @@
-"""Execution: executors (this process, worker processes) and the run state of long runs (checkpoints)."""
+"""Execution: executors (this process, worker processes, a Dask cluster) and the run state of long runs."""
 
-from .executor import Executor, ProcessExecutor, SerialExecutor, make_executor
+from .executor import DaskExecutor, Executor, ProcessExecutor, SchedulerError, SerialExecutor, make_executor
 from .run_state import CheckpointError, RunState
 
-__all__ = ["CheckpointError", "Executor", "ProcessExecutor", "RunState", "SerialExecutor", "make_executor"]
+__all__ = ["CheckpointError", "DaskExecutor", "Executor", "ProcessExecutor", "RunState", "SchedulerError",
+           "SerialExecutor", "make_executor"]

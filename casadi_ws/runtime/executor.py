@@ -9,6 +9,9 @@ workers are processes with one thread each.
 
 ``SerialExecutor``   in this process, with the caller's model (no copy)
 ``ProcessExecutor``  a pool of N fresh ('spawn') processes with one BLAS thread each
+``DaskExecutor``     the workers of a Dask cluster: an existing one (its scheduler's address; workers on one
+                     machine or many, started with ``dask worker ADDRESS --nthreads 1``) or a
+                     ``distributed.LocalCluster`` of N single-threaded worker processes
 
 OpenBLAS's threads slow this workload down: SuperLU and the small dense least-squares problems call BLAS on
 blocks too small to share, and two processes each running two BLAS threads on two cores fight. Measured on
@@ -29,8 +32,8 @@ from typing import Callable, Iterator
 
 from .run_state import problem_fingerprint
 
-__all__ = ["Executor", "ProcessExecutor", "SerialExecutor", "deferred_interrupt", "make_executor", "model_for",
-           "one_blas_thread"]
+__all__ = ["DaskExecutor", "Executor", "ProcessExecutor", "SerialExecutor", "SchedulerError", "deferred_interrupt",
+           "make_executor", "model_for", "one_blas_thread"]
 
 
 @contextlib.contextmanager
@@ -65,6 +68,14 @@ def model_for(problem, key: str | None = None):
 
 def _call(fn, key, blob, job):
     return fn(model_for(blob, key), *job)
+
+
+def _call_one_thread(fn, key, blob, job):
+    # a Dask worker process is not ours to configure at start: limit BLAS around each job
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        return fn(model_for(blob, key), *job)
 
 
 class Executor:
@@ -145,6 +156,64 @@ class ProcessExecutor(Executor):
 
     def close(self) -> None:
         self._pool.shutdown(cancel_futures=True)
+
+
+class SchedulerError(RuntimeError):
+    """The Dask scheduler could not be reached."""
+
+
+class DaskExecutor(Executor):
+    """Jobs run as Dask tasks: on the cluster at ``address`` or on a LocalCluster of ``workers`` processes.
+
+    The problem travels once to every worker (``Client.scatter(broadcast=True)``); each worker builds its
+    model on its first job of that problem and keeps it. Tasks lost with a worker are run again elsewhere by
+    the scheduler, and the jobs are deterministic, so the results are the same. Workers must run one thread
+    each: IPOPT under CasADi is not thread-safe.
+    """
+
+    def __init__(self, address: str | None = None, workers: int | None = None, problem=None,
+                 timeout: float = 10.0):
+        from distributed import Client, LocalCluster
+
+        self._cluster = None
+        if address:
+            try:
+                self.client = Client(address, timeout=timeout)
+            except (OSError, TimeoutError) as exc:
+                raise SchedulerError(f"cannot reach the Dask scheduler at {address} within {timeout:g} s "
+                                     f"({type(exc).__name__})") from None
+        else:
+            for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+                os.environ.setdefault(var, "1")
+            self._cluster = LocalCluster(n_workers=int(workers or 1), threads_per_worker=1, processes=True,
+                                         dashboard_address=":0", silence_logs=50)
+            self.client = Client(self._cluster)
+        self.workers = max(1, len(self.client.scheduler_info().get("workers", {})))
+        self.dashboard = self.client.dashboard_link
+        self._blobs: dict[str, object] = {}
+
+    def _blob(self, problem):
+        key = problem_fingerprint(problem)
+        if key not in self._blobs:
+            self._blobs[key] = self.client.scatter(pickle.dumps(problem, protocol=4), broadcast=True)
+        return key, self._blobs[key]
+
+    def map_unordered(self, fn, problem, jobs):
+        from distributed import as_completed
+
+        key, blob = self._blob(problem)
+        futures = [self.client.submit(_call_one_thread, fn, key, blob, job, pure=False) for job in jobs]
+        index = {f.key: i for i, f in enumerate(futures)}
+        try:
+            for f in as_completed(futures):
+                yield index[f.key], f.result()
+        finally:
+            self.client.cancel([f for f in futures if not f.done()])
+
+    def close(self) -> None:
+        self.client.close()
+        if self._cluster is not None:
+            self._cluster.close()
 
 
 def make_executor(workers: int, model=None, problem=None) -> Executor:
