@@ -64,6 +64,8 @@ def main():
         for r in rows:
             lines.append(f"| {r[0]} | {r[1]:.1f} | {1e3 * r[2]:.2f} | {r[3]:.1f} | {s[3] / r[3]:.2f} | "
                          f"{r[4]:.1f} | {s[4] / r[4]:.2f} |")
+        lines += ["", "Decision and what it means at scale: see the note kept in BENCHMARKS.md (rewrite it from the "
+                  "new numbers)."]
         write_section("dask", "\n".join(lines))
 
 

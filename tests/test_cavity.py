@@ -280,3 +280,62 @@ def test_reach_and_follow_with_a_cavity():
     path = [solve_equilibrium(m, [p]).tip for p in (2e3, 4e3)]
     f = follow(m, path)
     assert f.reachable.all()
+
+
+def test_surface_files_that_are_not_a_chamber_wall_are_refused(tmp_path):
+    """Found by review: the faces of an interior tetrahedron, and two chambers oriented differently, were
+    accepted (pressure on interior nodes; one chamber deflated)."""
+    import meshio
+
+    from casadi_ws.fem.surface import reverse
+    from casadi_ws.io.cavities import cavity_from_surface
+
+    mesh = hollow_box(n=6)
+    t = mesh.tets[np.argmin(np.linalg.norm(mesh.nodes[mesh.tets].mean(1) - 0.02, axis=1))]
+    faces = np.array([[t[0], t[2], t[1]], [t[0], t[1], t[3]], [t[1], t[2], t[3]], [t[0], t[3], t[2]]])
+    meshio.write(tmp_path / "tet.vtk", meshio.Mesh(mesh.nodes, [("triangle", faces)]))
+    with pytest.raises(ValueError, match="4 of its 4 triangles are not on the mesh's boundary"):
+        cavity_from_surface(mesh, tmp_path / "tet.vtk")
+    big = box_mesh((0.2, 0.1, 0.1), (12, 6, 6))
+    c = big.nodes[big.tets].mean(1)
+    holes = np.all(np.abs(c - [0.05, 0.05, 0.05]) < 0.0251, axis=1) | \
+        np.all(np.abs(c - [0.15, 0.05, 0.05]) < 0.0168, axis=1)
+    tets = big.tets[~holes]
+    used = np.unique(tets)
+    remap = -np.ones(big.n_nodes, dtype=np.int64)
+    remap[used] = np.arange(used.size)
+    two = Mesh(big.nodes[used], remap[tets], "<two chambers>")
+    a, b = inner_boundaries(two)
+    meshio.write(tmp_path / "two.vtk", meshio.Mesh(two.nodes, [("triangle", np.vstack([a, reverse(b)]))]))
+    with pytest.raises(ValueError, match="2 closed pieces are oriented differently"):
+        cavity_from_surface(two, tmp_path / "two.vtk")
+    meshio.write(tmp_path / "both.vtk", meshio.Mesh(two.nodes, [("triangle", np.vstack([a, b]))]))
+    cav = cavity_from_surface(two, tmp_path / "both.vtk")
+    assert np.isclose(cav.rest_volume(), surface_volume(two.nodes, a) + surface_volume(two.nodes, b))
+
+
+def test_checkpoint_fingerprint_sees_material_regions():
+    from dataclasses import replace
+
+    from casadi_ws.runtime.run_state import fingerprint
+
+    pb = chamber_problem(1, "linear")
+    tets = np.flatnonzero(pb.mesh.nodes[pb.mesh.tets].mean(1)[:, 2] < 0.02)
+    a = StaticModel(replace(pb, regions=[(tets, Material("linear", 1e7, 0.3))]))
+    b = StaticModel(replace(pb, regions=[(tets, Material("linear", 5e7, 0.3))]))
+    assert fingerprint("fb", a, {}) != fingerprint("fb", b, {})
+
+
+def test_no_solver_output_at_exit_and_other_exit_handlers_keep_stdout():
+    import subprocess
+    import sys
+
+    code = ("import atexit; atexit.register(lambda: print('report')); import numpy as np, casadi_ws as cw\n"
+            "from conftest import small_trunk\n"
+            "m = cw.StaticModel(small_trunk()); r = cw.reach(m, m.p0 + [0.004, 0, -0.001])\n"
+            "q = cw.equilibrium_function(m)\n")
+    from conftest import REPO
+
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO / "tests")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout == "report\n"  # MUMPS's 'JOB = -2' farewell is not there, the user's report is

@@ -42,11 +42,6 @@ class _Pattern:
         self.sparsity = ca.Sparsity(shape[0], shape[1], indptr.tolist(), self.rows.tolist())
         self.indptr = indptr
 
-    @staticmethod
-    def of(sparsity: ca.Sparsity) -> "_Pattern":
-        r, c = sparsity.get_triplet()
-        return _Pattern(sparsity.shape, r, c)
-
     def transpose(self) -> "_Pattern":
         return _Pattern(self.shape[::-1], self.cols, self.rows)
 
@@ -159,7 +154,6 @@ class _ResidualFunctions:
             hc.append(P.col)
         keys = np.unique(np.concatenate(hc) * n + np.concatenate(hr))
         self.H = _Pattern((n, n), keys % n, keys // n)
-        self._k_in_h = np.searchsorted(keys, cols * n + rows)
         self._h_keys = keys
 
     # ------------------------------------------------------------------ numeric pieces (free-dof vectors in)

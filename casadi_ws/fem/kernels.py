@@ -27,7 +27,13 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-__all__ = ["ElementBatch", "cache_dir", "have_compiler"]
+__all__ = ["ElementBatch", "MAX_COMPILED_CODE", "cache_dir", "have_compiler"]
+
+MAX_COMPILED_CODE = 20_000_000
+"""Generated C larger than this (bytes) is not compiled: the Hessian-vector function of a corotational
+10-node element is 166 MB of C, which gcc had not compiled after 5 minutes at -O1. Such a function runs on
+CasADi's virtual machine instead (slow: an IPOPT problem on an order-2 corotational mesh is impractical;
+use neohookean or the reduced backward there)."""
 
 _DRIVER = r"""
 #include <stddef.h>
@@ -81,19 +87,24 @@ def _build(fun: ca.Function) -> Path | None:
     lib = cache_dir() / f"{name}_{key}.so"
     if lib.exists():
         return lib
-    src = lib.with_suffix(f".{os.getpid()}.c")
-    src.write_text(code)
-    part = lib.with_suffix(f".{os.getpid()}.part")
-    # gcc's -O2 time grows faster than linearly with one huge straight-line function: the stiffness of a
-    # corotational 10-node element (2.5 MB of C) took ~4 min at -O2 and 7 s at -O1
-    opt = "-O2" if len(code) < 500_000 else "-O1"
-    res = subprocess.run([cc, opt, "-fPIC", "-shared", str(src), "-o", str(part), "-lm"],
-                         capture_output=True, text=True)
-    src.unlink(missing_ok=True)
-    if res.returncode != 0:
+    if len(code) > MAX_COMPILED_CODE:
         return None
-    os.replace(part, lib)  # atomic: a concurrent process never loads a half-written library
-    return lib
+    src = lib.with_suffix(f".{os.getpid()}.c")
+    part = lib.with_suffix(f".{os.getpid()}.part")
+    try:
+        src.write_text(code)
+        # gcc's -O2 time grows faster than linearly with one huge straight-line function: the stiffness of
+        # a corotational 10-node element (2.5 MB of C) took ~4 min at -O2 and 7 s at -O1
+        opt = "-O2" if len(code) < 500_000 else "-O1"
+        res = subprocess.run([cc, opt, "-fPIC", "-shared", str(src), "-o", str(part), "-lm"],
+                             capture_output=True, text=True)
+        if res.returncode != 0:
+            return None
+        os.replace(part, lib)  # atomic: a concurrent process never loads a half-written library
+        return lib
+    finally:  # also when interrupted: no 100 MB sources left in the cache
+        src.unlink(missing_ok=True)
+        part.unlink(missing_ok=True)
 
 
 class ElementBatch:

@@ -88,6 +88,18 @@ def cavity_from_surface(mesh, path: Path, name="cavity", u_min=0.0, u_max=1e4, s
     if same:
         raise ValueError(f"the surface is not consistently oriented: {same} edge(s) run the same way in both "
                          f"of their triangles")
-    if surface_volume(mesh.nodes, faces) < 0:  # closed and consistent, but normals point into the cavity
+    # a pressure acts on the body's boundary: every triangle must be a boundary face of the mesh
+    boundary = {tuple(k) for k in np.sort(boundary_faces(mesh)[:, :3], axis=1)}
+    inside = sum(tuple(k) not in boundary for k in np.sort(faces[:, :3], axis=1))
+    if inside:
+        raise ValueError(f"{inside} of its {len(faces)} triangles are not on the mesh's boundary (a cavity's "
+                         f"wall is a boundary of the mesh)")
+    # each closed piece encloses a chamber: turn around the pieces whose normals point into it, if all do
+    pieces = [faces[c] for c in components(faces)]
+    signs = [np.sign(surface_volume(mesh.nodes, f)) for f in pieces]
+    if len(set(signs)) > 1:
+        raise ValueError(f"its {len(pieces)} closed pieces are oriented differently ({signs.count(-1.0)} with "
+                         f"normals into their chamber): orient them all the same way")
+    if signs[0] < 0:  # closed and consistent, but normals point into the cavity
         faces = reverse(faces)
     return _compact(mesh, faces, name, u_min, u_max)

@@ -319,8 +319,7 @@ def _read_fixed(r: _Reader, d, mesh: Mesh):
     scale = mesh.characteristic_length()
     M[:, 3:] /= scale
     if M.shape[0] < 6 or np.linalg.svd(M, compute_uv=False)[5] <= 1e-6 * np.sqrt(max(len(M), 1)):
-        key = "fixed" if not isinstance(d, list) else "fixed"
-        r.fail(key, f"the supports ({full.size} fully fixed node(s), {len(partial)} partial selection(s)) do "
+        r.fail("fixed", f"the supports ({full.size} fully fixed node(s), {len(partial)} partial selection(s)) do "
                     f"not prevent rigid motion")
     return full, partial
 
@@ -329,7 +328,8 @@ def _read_selection(r: _Reader, d, mesh: Mesh, key: str):
     if isinstance(d, dict) and "components" in d:
         comps_raw = d["components"]
         d = {k: v for k, v in d.items() if k != "components"}
-        if not isinstance(comps_raw, list) or not comps_raw or any(c not in _COMPONENTS for c in comps_raw):
+        if not isinstance(comps_raw, list) or not comps_raw or \
+                any(not isinstance(c, str) or c not in _COMPONENTS for c in comps_raw):
             r.fail(f"{key}.components", f"expected a non-empty list of x, y, z, got {comps_raw!r}")
         comps = tuple(sorted({_COMPONENTS[c] for c in comps_raw}))
     else:
@@ -388,9 +388,12 @@ def _read_cavities(r: _Reader, lst, mesh: Mesh, base: Path) -> list:
                     r.fail(f"{key}.surface", f"file not found: {path}")
                 scale = r.number(c, "scale", key, 1.0, lo=0.0, lo_open=True)
                 cav = cavity_from_surface(mesh, path, name, u_min, u_max, scale)
-                where = f"{key}.surface"
             else:
+                if "scale" in c:
+                    r.fail(f"{key}.scale", "only a surface file has a scale")
                 cav = cavity_enclosing(mesh, r.vector(c["enclosing"], f"{key}.enclosing"), name, u_min, u_max)
+        except ProblemError:
+            raise
         except ValueError as exc:
             r.fail(f"{key}.surface" if "surface" in c else f"{key}.enclosing", str(exc))
         out.append(cav)
@@ -551,6 +554,8 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
                 if not path.is_file():
                     r.fail("task.points", f"file not found: {path}")
                 task = read_task(csv=path)
+        except ProblemError:
+            raise
         except (ValueError, TypeError) as exc:
             r.fail(f"task.{next(iter(t))}", str(exc))
     name = str(d.get("name", Path(source).stem))

@@ -29,7 +29,7 @@ import casadi as ca
 import numpy as np
 
 from ..fem.functions import point_function, residual_function
-from ..solvers.rootfinder import quiet_stdout
+from ..solvers.rootfinder import quiet_stdout, register_solver
 
 __all__ = ["EquilibriumNLP", "IPOPT_OPTIONS", "NLPSolution", "quiet_stdout", "release_solvers", "tracking"]
 
@@ -87,6 +87,11 @@ class EquilibriumNLP:
         self._params: dict[str, tuple[ca.MX, np.ndarray]] = {}
         self._solver = None
         self._lam_g = None
+        register_solver(self)
+
+    def release(self) -> None:
+        """Drop the IPOPT solver (rebuilt on the next solve), quietly."""
+        self._reset()
 
     # ------------------------------------------------------------------ building
     def parameter(self, name: str, rows: int, cols: int = 1, value=0.0) -> ca.MX:
@@ -135,6 +140,8 @@ class EquilibriumNLP:
         out = []
         for name, (sym, default) in self._params.items():
             v = np.asarray(default if values.get(name) is None else values[name], dtype=float)
+            if v.ndim == 2 and v.shape != sym.shape:
+                raise ValueError(f"parameter {name!r}: expected shape {sym.shape}, got {v.shape}")
             if v.size == sym.numel():  # a vector for a column, or the matrix itself
                 out.append(v.reshape(sym.shape, order="F").ravel(order="F"))
             else:

@@ -116,7 +116,7 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
     if getattr(model.problem.solver, "newton", "builtin") == "rootfinder":
         from .rootfinder import rootfinder_newton
 
-        q, rel, its = rootfinder_newton(model, u, q, load, tol, max_iter)
+        q, rel, its = rootfinder_newton(model, u, q, load, tol if target is None else min(tol, target), max_iter)
         status = CONVERGED if rel < tol else (DIVERGED if not np.isfinite(rel) else MAX_ITERATIONS)
         return _Newton(q, status, its, its, rel, None)
     free = model.free

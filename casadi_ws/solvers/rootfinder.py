@@ -20,13 +20,17 @@ import contextlib
 import gc
 import os
 import sys
+import weakref
 
 import casadi as ca
 import numpy as np
 
-__all__ = ["equilibrium_function", "quiet_stdout", "release_rootfinders", "rootfinder_newton"]
+__all__ = ["equilibrium_function", "quiet_stdout", "register_solver", "release_rootfinders", "rootfinder_newton"]
 
 _ROOTFINDERS: dict = {}
+"""(id(model), max_iter, tol) -> (weak reference to the model, rootfinder, G): not keeping models alive."""
+_LIVE_SOLVERS: "weakref.WeakSet" = weakref.WeakSet()
+"""Objects holding IPOPT/MUMPS solvers (``release()`` drops them), released quietly at exit."""
 
 
 @contextlib.contextmanager
@@ -45,22 +49,34 @@ def quiet_stdout():
 
 
 def release_rootfinders() -> None:
-    """Destroy the cached rootfinders now, without MUMPS's farewell on stdout."""
+    """Destroy the cached rootfinders and the registered NLP solvers now, without MUMPS's farewell."""
     with quiet_stdout():
         _ROOTFINDERS.clear()
+        for holder in list(_LIVE_SOLVERS):
+            holder.release()
         gc.collect()
 
 
-def _silence_at_exit() -> None:
-    # solvers still alive at shutdown (cached on models) are destroyed after the atexit handlers, and
-    # their MUMPS would write to stdout then: nothing else of ours writes after this point
+def _at_exit() -> None:
+    # solvers still alive at shutdown (ours, and those inside a user's Functions) are destroyed after every
+    # handler, and their MUMPS writes to the C-level stdout then. Drop ours quietly; then point file
+    # descriptor 1 at /dev/null but Python's sys.stdout at the real stdout, so that exit handlers that run
+    # after this one still print.
+    release_rootfinders()
     sys.stdout.flush()
+    saved = os.dup(1)
     devnull = os.open(os.devnull, os.O_WRONLY)
     os.dup2(devnull, 1)
     os.close(devnull)
+    sys.stdout = os.fdopen(saved, "w", buffering=1)
 
 
-atexit.register(_silence_at_exit)
+atexit.register(_at_exit)
+
+
+def register_solver(holder) -> None:
+    """Release ``holder``'s solvers (its ``release()``) quietly at exit, if it is still alive then."""
+    _LIVE_SOLVERS.add(holder)
 
 
 def _rootfinder(model, max_iter: int, tol: float) -> ca.Function:
@@ -68,8 +84,11 @@ def _rootfinder(model, max_iter: int, tol: float) -> ca.Function:
     serve every solve."""
     key = (id(model), max_iter, tol)
     hit = _ROOTFINDERS.get(key)
-    if hit is not None and hit[0] is model:
+    if hit is not None and hit[0]() is model:
         return hit[1]
+    for k in [k for k, v in _ROOTFINDERS.items() if v[0]() is None]:  # models gone since
+        with quiet_stdout():
+            del _ROOTFINDERS[k]
     from ..fem.functions import residual_function
 
     R = residual_function(model, with_load=True)
@@ -80,7 +99,7 @@ def _rootfinder(model, max_iter: int, tol: float) -> ca.Function:
     rf = ca.rootfinder("equilibrium", "newton", G, {
         "linear_solver": "mumps", "abstol": tol / np.sqrt(n), "abstolStep": 0.0, "max_iter": max_iter,
         "error_on_fail": False})
-    _ROOTFINDERS[key] = (model, rf, G)
+    _ROOTFINDERS[key] = (weakref.ref(model), rf, G)
     return rf
 
 

@@ -64,7 +64,10 @@ def read_task(box=None, csv: str | Path | None = None) -> Task:
         if pts.shape[1] < 3 or not np.all(np.isfinite(pts[:, :3])):
             raise ValueError(f"{csv}: expected rows of x, y, z")
         return Task(points=pts[:, :3], source=str(csv))
-    b = np.asarray(box, dtype=float)
+    try:
+        b = np.asarray(box, dtype=float)
+    except (ValueError, TypeError):
+        b = np.zeros(0)
     if b.shape != (2, 3) or not np.all(np.isfinite(b)) or np.any(b[0] > b[1]):
         raise ValueError(f"expected [[xmin, ymin, zmin], [xmax, ymax, zmax]] with min <= max, got {box!r}")
     return Task(box=b)
