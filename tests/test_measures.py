@@ -70,3 +70,13 @@ def test_solve_reports_measures_and_task_share(tmp_path):
     r = subprocess.run([sys.executable, "-m", "casadi_ws.cli", "solve", str(tmp_path / "t.yaml"), "--nd", "2",
                         "--out", str(tmp_path / "p"), "--task-box", "1,2,3"], capture_output=True, text=True)
     assert r.returncode == 2 and "--task-box: expected xmin,ymin,zmin,xmax,ymax,zmax" in r.stderr
+
+
+def test_fb_measures_count_the_cells_it_reports():
+    from casadi_ws import FBSettings, forward_backward
+
+    pb = two_cable_plate()
+    m = StaticModel(pb)
+    fb = forward_backward(pb, FBSettings(step=2e-6, progress=False), model=m)
+    for step in (None, 2e-6):  # the command line passes --step: the same grid, the same cells
+        assert measures(fb, step=step)["cells"] == len(fb.arrays["cells"])
