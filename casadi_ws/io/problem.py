@@ -299,9 +299,9 @@ def _read_fixed(r: _Reader, d, mesh: Mesh):
     if isinstance(d, list):
         if not d:
             r.fail("fixed", "expected a selection or a non-empty list of selections")
-        parts = [_read_selection(r, s, mesh, f"fixed[{i}]") for i, s in enumerate(d)]
+        parts = [_read_selection(r, s, mesh, f"fixed[{i}]", alone=False) for i, s in enumerate(d)]
     else:
-        parts = [_read_selection(r, d, mesh, "fixed")]
+        parts = [_read_selection(r, d, mesh, "fixed", alone=True)]
     full = np.unique(np.concatenate([n for n, c in parts if c == (0, 1, 2)] + [np.zeros(0, dtype=np.int64)]))
     partial = [(n, c) for n, c in parts if c != (0, 1, 2)]
     # rigid motions are prevented only if no infinitesimal rigid motion leaves every fixed component at 0
@@ -324,7 +324,9 @@ def _read_fixed(r: _Reader, d, mesh: Mesh):
     return full, partial
 
 
-def _read_selection(r: _Reader, d, mesh: Mesh, key: str):
+def _read_selection(r: _Reader, d, mesh: Mesh, key: str, alone: bool):
+    """One support; ``alone``: the only one, so a full clamp needs three non-collinear nodes itself (the
+    message users of a single box know), else the rank test on all supports together decides."""
     if isinstance(d, dict) and "components" in d:
         comps_raw = d["components"]
         d = {k: v for k, v in d.items() if k != "components"}
@@ -356,11 +358,10 @@ def _read_selection(r: _Reader, d, mesh: Mesh, key: str):
     if nodes.size == 0:
         lo, hi = mesh.nodes.min(0), mesh.nodes.max(0)
         r.fail(key, f"selects no node (mesh spans {np.round(lo, 6).tolist()} to {np.round(hi, 6).tolist()} m)")
-    if comps == (0, 1, 2):
-        # a single clamp: three nodes that are not collinear
+    if alone and comps == (0, 1, 2):
         x = mesh.nodes[nodes] - mesh.nodes[nodes].mean(0)
         sv = np.linalg.svd(x, compute_uv=False) if nodes.size >= 3 else np.zeros(2)
-        if key.startswith("fixed.") and (nodes.size < 3 or sv[1] <= 1e-6 * mesh.characteristic_length()):
+        if nodes.size < 3 or sv[1] <= 1e-6 * mesh.characteristic_length():
             r.fail(key, f"selects {nodes.size} node(s) on a line or fewer: they do not prevent rigid motion")
     return nodes, comps
 
@@ -448,6 +449,55 @@ def tip_centre(mesh: Mesh) -> np.ndarray:
     return np.array([top[:, 0].mean(), top[:, 1].mean(), z.max()])
 
 
+def _read_regions(r: _Reader, lst, mesh: Mesh, material: Material) -> list:
+    """``material_regions``: (tetrahedra whose centroid lies in the box, Material) pairs."""
+    regions = []
+    lst = lst or []
+    if not isinstance(lst, list):
+        r.fail("material_regions", "expected a list of {box, young_modulus, poisson_ratio, density}")
+    centroids = mesh.nodes[mesh.corners].mean(axis=1)
+    for i, g in enumerate(lst):
+        key = f"material_regions[{i}]"
+        r.mapping(g, key, _REGION)
+        b = g.get("box")
+        if not isinstance(b, (list, tuple)) or len(b) != 2:
+            r.fail(f"{key}.box", f"expected [[xmin, ymin, zmin], [xmax, ymax, zmax]], got {b!r}")
+        lo, hi = r.vector(b[0], f"{key}.box[0]"), r.vector(b[1], f"{key}.box[1]")
+        tets = np.flatnonzero(np.all((centroids >= lo) & (centroids <= hi), axis=1))
+        if tets.size == 0:
+            r.fail(f"{key}.box", "holds the centroid of no tetrahedron")
+        regions.append((tets, Material(material.model,
+                                       r.number(g, "young_modulus", key, material.young_modulus, lo=0.0, lo_open=True),
+                                       r.number(g, "poisson_ratio", key, material.poisson_ratio, lo=-1.0, hi=0.5,
+                                                lo_open=True, hi_open=True),
+                                       r.number(g, "density", key, material.density, lo=0.0))))
+    return regions
+
+
+def _read_task(r: _Reader, value, base: Path):
+    """``task``: a box or a CSV of points (:class:`casadi_ws.workspace.measures.Task`), or None."""
+    if value is None:
+        return None
+    from ..workspace.measures import read_task
+
+    t = r.mapping(value, "task", {"box", "points"})
+    if len(t) != 1:
+        r.fail("task", "expected exactly one of 'box: [[xmin, ymin, zmin], [xmax, ymax, zmax]]' or 'points: FILE.csv'")
+    try:
+        if "box" in t:
+            task = read_task(box=t["box"])
+        else:
+            path = base / str(t["points"])
+            if not path.is_file():
+                r.fail("task.points", f"file not found: {path}")
+            task = read_task(csv=path)
+    except ProblemError:
+        raise
+    except (ValueError, TypeError) as exc:
+        r.fail(f"task.{next(iter(t))}", str(exc))
+    return task
+
+
 def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) -> Problem:
     """Validate a problem given as plain data (as read from YAML) and build it."""
     r = _Reader(source)
@@ -472,26 +522,7 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
                         r.number(m, "young_modulus", "material", lo=0.0, lo_open=True),
                         r.number(m, "poisson_ratio", "material", lo=-1.0, hi=0.5, lo_open=True, hi_open=True),
                         r.number(m, "density", "material", 1000.0, lo=0.0))
-    regions = []
-    lst = d.get("material_regions") or []
-    if not isinstance(lst, list):
-        r.fail("material_regions", "expected a list of {box, young_modulus, poisson_ratio, density}")
-    centroids = mesh.nodes[mesh.corners].mean(axis=1)
-    for i, g in enumerate(lst):
-        key = f"material_regions[{i}]"
-        r.mapping(g, key, _REGION)
-        b = g.get("box")
-        if not isinstance(b, (list, tuple)) or len(b) != 2:
-            r.fail(f"{key}.box", f"expected [[xmin, ymin, zmin], [xmax, ymax, zmax]], got {b!r}")
-        lo, hi = r.vector(b[0], f"{key}.box[0]"), r.vector(b[1], f"{key}.box[1]")
-        tets = np.flatnonzero(np.all((centroids >= lo) & (centroids <= hi), axis=1))
-        if tets.size == 0:
-            r.fail(f"{key}.box", "holds the centroid of no tetrahedron")
-        regions.append((tets, Material(model,
-                                       r.number(g, "young_modulus", key, material.young_modulus, lo=0.0, lo_open=True),
-                                       r.number(g, "poisson_ratio", key, material.poisson_ratio, lo=-1.0, hi=0.5,
-                                                lo_open=True, hi_open=True),
-                                       r.number(g, "density", key, material.density, lo=0.0))))
+    regions = _read_regions(r, d.get("material_regions"), mesh, material)
     gravity = r.vector(d["gravity"], "gravity") if d.get("gravity") is not None else np.zeros(3)
     fixed, partial_fixed = _read_fixed(r, d["fixed"], mesh)
     cables = _read_cables(r, d["cables"], mesh) if "cables" in d else []
@@ -539,25 +570,7 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
             workspace[key] = w[key]
     if "workers" in w:
         workspace["workers"] = r.number(w, "workers", "workspace", lo=1, integer=True)
-    task = None
-    if d.get("task") is not None:
-        from ..workspace.measures import read_task
-
-        t = r.mapping(d["task"], "task", {"box", "points"})
-        if len(t) != 1:
-            r.fail("task", "expected exactly one of 'box: [[xmin, ymin, zmin], [xmax, ymax, zmax]]' or 'points: FILE.csv'")
-        try:
-            if "box" in t:
-                task = read_task(box=t["box"])
-            else:
-                path = base / str(t["points"])
-                if not path.is_file():
-                    r.fail("task.points", f"file not found: {path}")
-                task = read_task(csv=path)
-        except ProblemError:
-            raise
-        except (ValueError, TypeError) as exc:
-            r.fail(f"task.{next(iter(t))}", str(exc))
+    task = _read_task(r, d.get("task"), base)
     name = str(d.get("name", Path(source).stem))
     return Problem(mesh, material, fixed, cables + cavities, end_effector, gravity, loads, solver, workspace, name,
                    source, regions, task, partial_fixed)
