@@ -96,27 +96,6 @@ def _print_finished(out: Path) -> int:
     return 0
 
 
-def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
-    """Result files plus the three-view and 3-D pictures into ``out``."""
-    from .io.plots import three_views, workspace_3d
-    from .io.scene import write_scene
-
-    result.save(out)
-    scene = write_scene(problem, out)
-    three_views(result, out / "three_views.png", problem.mesh, title=f"{problem.name}: {result.method} workspace")
-    workspace_3d(result, out / "workspace_3d.png", problem.mesh, title=f"{problem.name}: {result.method}")
-    for w in result.warnings():
-        print(f"casadi-ws: warning: {w}", file=sys.stderr)
-    if not quiet:
-        s = result.summary()
-        per_cell = s["counters"].get("factorizations_per_cell")
-        print(f"{result.method}: {s['n_points']} reachable points, {s['n_failed']} failed, {s['time_s']:.1f} s"
-              + (f", {per_cell:.2f} LU factorisations per reached cell" if per_cell is not None else ""))
-        extra = " cells.vtu" if (out / "cells.vtu").exists() else ""
-        print(f"wrote {out}/: summary.json points.csv failures.csv result.npz points.vtp{extra} "
-              f"{' '.join(scene)} (ParaView) three_views.png workspace_3d.png")
-
-
 _SOLVE_DEFAULTS = {"method": "forward", "nd": 11, "step": 0.004, "strategy": "uniform", "backward": "reduced",
                    "workers": 1}
 
@@ -209,6 +188,7 @@ def cmd_solve(args) -> int:
     finally:
         if executor is not None:
             executor.close()
+    from .io.output import write_outputs
     from .workspace.measures import measures
 
     result.measures = measures(result, step=args.step, task=task)
@@ -299,6 +279,7 @@ def cmd_follow(args) -> int:
 
 def cmd_demo(args) -> int:
     from .workspace.forward import ForwardSettings, forward
+    from .io.output import write_outputs
     from .io.problem import default_problem
 
     problem = default_problem()

@@ -1,0 +1,29 @@
+"""A workspace result as the files a user opens: result files, ParaView scene, pictures."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+__all__ = ["write_outputs"]
+
+
+def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
+    """Result files plus the three-view and 3-D pictures into ``out``."""
+    from .plots import three_views, workspace_3d
+    from .scene import write_scene
+
+    result.save(out)
+    scene = write_scene(problem, out)
+    three_views(result, out / "three_views.png", problem.mesh, title=f"{problem.name}: {result.method} workspace")
+    workspace_3d(result, out / "workspace_3d.png", problem.mesh, title=f"{problem.name}: {result.method}")
+    for w in result.warnings():
+        print(f"casadi-ws: warning: {w}", file=sys.stderr)
+    if not quiet:
+        s = result.summary()
+        per_cell = s["counters"].get("factorizations_per_cell")
+        print(f"{result.method}: {s['n_points']} reachable points, {s['n_failed']} failed, {s['time_s']:.1f} s"
+              + (f", {per_cell:.2f} LU factorisations per reached cell" if per_cell is not None else ""))
+        extra = " cells.vtu" if (out / "cells.vtu").exists() else ""
+        print(f"wrote {out}/: summary.json points.csv failures.csv result.npz points.vtp{extra} "
+              f"{' '.join(scene)} (ParaView) three_views.png workspace_3d.png")
