@@ -1,7 +1,9 @@
 """Executors: where the methods' independent pieces of work run (this process, or worker processes).
 
 A method hands an executor a function, the problem and a list of jobs; the executor calls
-``fn(model, *job)`` for each job with a model of the problem and yields the results. Compiled CasADi
+``fn(model, *job)`` for each job with a model of the problem and yields the results. A design study, whose
+pieces are whole workspace runs of different problems, uses the plain interface instead:
+``submit(fn, *args)`` returns a future and ``wait(futures)`` splits futures into done and pending. Compiled CasADi
 objects do not travel between processes, so only the problem, the jobs and the results (plain data and
 numpy arrays) do: every worker process builds its model once per problem (:func:`model_for`, keyed by the
 problem's fingerprint) and keeps it for the next job. IPOPT is not thread-safe under CasADi, so parallel
@@ -70,6 +72,13 @@ def _call(fn, key, blob, job):
     return fn(model_for(blob, key), *job)
 
 
+def _plain_one_thread(fn, args):
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        return fn(*args)
+
+
 def _call_one_thread(fn, key, blob, job):
     # a Dask worker process is not ours to configure at start: limit BLAS around each job
     from threadpoolctl import threadpool_limits
@@ -94,6 +103,15 @@ class Executor:
             out[i] = r
         return out
 
+    def submit(self, fn: Callable, *args):
+        """Start ``fn(*args)`` (a module-level function: it may run in another process); a future."""
+        raise NotImplementedError
+
+    def wait(self, futures) -> tuple[set, set]:
+        """Block until at least one of ``futures`` is done: (done, pending)."""
+        done, pending = wait(futures, return_when=FIRST_COMPLETED)
+        return set(done), set(pending)
+
     def close(self) -> None:
         pass
 
@@ -114,6 +132,30 @@ class SerialExecutor(Executor):
         model = self.model if self.model is not None else model_for(problem)
         for i, job in enumerate(jobs):
             yield i, fn(model, *job)
+
+    def submit(self, fn, *args):
+        return _Ready(fn, args)
+
+    def wait(self, futures):
+        return set(futures), set()
+
+
+class _Ready:
+    """A call already made (SerialExecutor.submit): the part of a Future's interface callers use."""
+
+    def __init__(self, fn, args):
+        try:
+            self._value, self._error = fn(*args), None
+        except Exception as exc:  # noqa: BLE001 - re-raised by result(), as a Future does
+            self._value, self._error = None, exc
+
+    def done(self) -> bool:
+        return True
+
+    def result(self):
+        if self._error is not None:
+            raise self._error
+        return self._value
 
 
 def _init_worker(key, blob):
@@ -153,6 +195,9 @@ class ProcessExecutor(Executor):
         finally:
             for f in pending:
                 f.cancel()
+
+    def submit(self, fn, *args):
+        return self._pool.submit(fn, *args)
 
     def close(self) -> None:
         self._pool.shutdown(cancel_futures=True)
@@ -209,6 +254,15 @@ class DaskExecutor(Executor):
                 yield index[f.key], f.result()
         finally:
             self.client.cancel([f for f in futures if not f.done()])
+
+    def submit(self, fn, *args):
+        return self.client.submit(_plain_one_thread, fn, args, pure=False)
+
+    def wait(self, futures):
+        from distributed import wait as dask_wait
+
+        done, pending = dask_wait(list(futures), return_when="FIRST_COMPLETED")
+        return set(done), set(pending)
 
     def close(self) -> None:
         self.client.close()
