@@ -3,7 +3,7 @@ workspace estimation, reusable inverse-control NLPs.
 
 The package is layered; each sub-package imports only those listed before it:
 ``status`` < ``actuation`` < ``fem`` < ``solvers`` < ``nlp`` < ``runtime`` < ``workspace`` < ``control``
-< ``io`` < ``cli``. The names below are the public API.
+< ``io`` < ``study`` < ``cli``. The names below are the public API.
 """
 
 from .actuation import Actuator, Cable, Cavity, trunk_cable
@@ -15,6 +15,7 @@ from .runtime import DaskExecutor, Executor, ProcessExecutor, SerialExecutor
 from .nlp import EquilibriumNLP, NLPSolution, tracking
 from .solvers import Equilibrium, equilibrium_function, solve_equilibrium
 from .status import Status
+from .study import Study, StudyResult, load_study, run_study
 from .workspace import (BackwardSettings, FBSettings, ForwardSettings, Task, WorkspaceResult, compare, forward,
                         forward_backward, load_result, measures)
 
@@ -44,6 +45,8 @@ __all__ = [
     "SolverSettings",
     "StaticModel",
     "Status",
+    "Study",
+    "StudyResult",
     "TET4",
     "Task",
     "WorkspaceResult",
@@ -57,11 +60,13 @@ __all__ = [
     "load_mesh",
     "load_problem",
     "load_result",
+    "load_study",
     "measures",
     "point_function",
     "problem_from_dict",
     "reach",
     "residual_function",
+    "run_study",
     "solve_equilibrium",
     "tracking",
     "trunk_cable",

@@ -1,4 +1,4 @@
-"""Command line: ``casadi-ws equilibrium|solve|compare|reach|follow|demo ...``.
+"""Command line: ``casadi-ws equilibrium|solve|compare|reach|follow|study|demo ...``.
 
 Exit codes: 0 success, 1 a solve did not converge (equilibrium), 2 bad input (problem file, arguments).
 Bad input prints one line naming the file and key; ``--debug`` shows the Python traceback instead.
@@ -277,6 +277,53 @@ def cmd_follow(args) -> int:
     return 0
 
 
+def cmd_study(args) -> int:
+    from .study import load_study, run_study
+    from .study.run import DB
+
+    study = load_study(args.study)
+    if args.workers < 1:
+        raise UsageError(f"--workers: expected an integer >= 1, got {args.workers}")
+    out = Path(args.out)
+    if args.resume and args.overwrite:
+        raise UsageError("--resume and --overwrite contradict each other")
+    if args.resume and not (out / DB).is_file():
+        print(f"casadi-ws: --resume: no study file in {out}: starting the study", file=sys.stderr)
+    if not args.resume and out.exists() and any(out.iterdir()):
+        if not args.overwrite:
+            raise UsageError(f"--out: {out} already holds files; pass --overwrite to replace them or --resume to "
+                             f"continue an interrupted study")
+        import shutil
+
+        shutil.rmtree(out)
+    if args.scheduler:
+        executor = _executor(args, None)
+    elif args.workers > 1:
+        from .runtime.executor import ProcessExecutor
+
+        executor = ProcessExecutor(args.workers)
+    else:
+        executor = None
+    try:
+        result = run_study(study, out, executor=executor, resume=args.resume, progress=not args.quiet)
+    except KeyboardInterrupt:
+        print(f"casadi-ws: interrupted; the study in {out} continues with the same command and --resume",
+              file=sys.stderr)
+        return 130
+    finally:
+        if executor is not None:
+            executor.close()
+    if not args.quiet:
+        failed = len(result.trials) - result.n_complete
+        best = result.best
+        print(f"study {study.name}: {len(result.trials)} trials, {failed} failed, {result.time_s:.1f} s; "
+              + ("no feasible design" if best is None else
+                 f"best: trial {best.number} ({', '.join(f'{o.measure} {best.measures[o.measure]:.4g}' for o in study.objectives)})"))
+        print(f"wrote {out}/: trials.csv study.png study.json study.db trials/"
+              + (" best.yaml best/" if best is not None else ""))
+    return 0
+
+
 def cmd_demo(args) -> int:
     from .workspace.forward import ForwardSettings, forward
     from .io.output import write_outputs
@@ -356,6 +403,17 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--step", type=float, default=None, help="grid step for the cell sets (default: B's)")
     c.add_argument("--plot", default=None, help="write the overlaid three views to this PNG")
     c.set_defaults(func=cmd_compare)
+
+    st = sub.add_parser("study", help="design study: workspaces of many designs, the best ones (grid or Optuna)")
+    st.add_argument("study", help="study YAML file (docs/studies.md)")
+    st.add_argument("--out", required=True, help="output directory")
+    st.add_argument("--workers", type=int, default=1, help="trials run at once, each in its own process (1)")
+    st.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="run the trials on an existing Dask cluster (e.g. tcp://host:8786; workers with --nthreads 1)")
+    st.add_argument("--resume", action="store_true", help="continue the study whose study.db is in --out")
+    st.add_argument("--overwrite", action="store_true", help="delete --out and start again")
+    st.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    st.set_defaults(func=cmd_study)
 
     d = sub.add_parser("demo", help="forward workspace of the built-in default problem (2-cable trunk)")
     d.add_argument("--nd", type=int, default=11, help="values per cable")

@@ -8,7 +8,7 @@ import casadi_ws
 
 PKG = Path(casadi_ws.__file__).parent
 # lower layers first; a module may import only from its own layer and those before it
-LAYERS = ["status", "actuation", "fem", "solvers", "nlp", "runtime", "workspace", "control", "io", "cli"]
+LAYERS = ["status", "actuation", "fem", "solvers", "nlp", "runtime", "workspace", "control", "io", "study", "cli"]
 
 
 def _imports(path: Path) -> set[str]:

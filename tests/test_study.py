@@ -1,0 +1,174 @@
+"""Design studies (issue: design studies at scale): a study's trials are the designs solved one by one, a
+killed study resumes without repeating a trial, bad designs are recorded and bad study files refused."""
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from conftest import REPO
+
+import casadi_ws as cw
+from casadi_ws.study.spec import apply
+
+STUDIES = Path(__file__).parent / "bad_inputs" / "studies"
+
+
+def tiny_study(tmp_path, **extra) -> Path:
+    """2 x 2 designs of the coarse 2-cable trunk (Young's modulus x tension limit), FB at 8 mm."""
+    d = {"name": "tiny", "problem": str(REPO / "problems" / "trunk_2cables.yaml"),
+         "set": {"mesh.resolution": 0.5},
+         "variables": [{"path": "material.young_modulus", "values": [1.2e7, 1.8e7]},
+                       {"path": "cables[*].u_max", "values": [60, 100]}],
+         "workspace": {"method": "fb", "step": 0.008}, "objectives": [{"maximize": "volume"}], "method": "grid"}
+    d.update(extra)
+    path = tmp_path / "study.yaml"
+    path.write_text(yaml.safe_dump(d))
+    return path
+
+
+def rows(out: Path) -> list[dict]:
+    with open(out / "trials.csv") as f:
+        return list(csv.DictReader(f))
+
+
+def cli(*args, **kw):
+    return subprocess.run([sys.executable, "-m", "casadi_ws.cli", *map(str, args)], capture_output=True, text=True,
+                          cwd=REPO, **kw)
+
+
+@pytest.mark.slow
+def test_a_grid_study_on_dask_reproduces_the_designs_solved_one_by_one(tmp_path):
+    study = cw.load_study(tiny_study(tmp_path))
+    with cw.DaskExecutor(workers=2) as ex:
+        res = cw.run_study(study, tmp_path / "out", executor=ex, progress=False)
+    assert len(res.trials) == 4 and res.n_complete == 4
+    base = yaml.safe_load((REPO / "problems" / "trunk_2cables.yaml").read_text())
+    volumes = {}
+    for E in (1.2e7, 1.8e7):
+        for umax in (60, 100):
+            data = apply(base, {"mesh.resolution": 0.5, "material.young_modulus": E, "cables[*].u_max": umax})
+            pb = cw.problem_from_dict(data, "design", REPO / "problems")
+            r = cw.forward_backward(pb, cw.FBSettings(step=0.008, progress=False))
+            volumes[(E, umax)] = cw.measures(r, step=0.008)["volume"]
+    got = {(t.params["material.young_modulus"], t.params["cables[*].u_max"]): t.measures["volume"] for t in res.trials}
+    assert got == volumes
+    assert len(set(volumes.values())) > 1  # the designs differ: the study could have mixed them up
+    best = max(volumes, key=volumes.get)
+    assert (res.best.params["material.young_modulus"], res.best.params["cables[*].u_max"]) == best
+    # best.yaml is a problem file of that design that loads from where it is
+    pb = cw.load_problem(tmp_path / "out" / "best.yaml")
+    assert pb.material.young_modulus == best[0] and pb.cables[0].u_max == best[1]
+    for f in ("trials.csv", "study.png", "study.json", "best/cells.vtu", "best/three_views.png"):
+        assert (tmp_path / "out" / f).is_file(), f
+    assert [float(r["volume"]) for r in rows(tmp_path / "out")] == pytest.approx([t.measures["volume"] for t in
+                                                                                 sorted(res.trials, key=lambda t: t.number)])
+
+
+@pytest.mark.slow
+def test_a_killed_study_resumes_and_finishes_with_no_trial_repeated(tmp_path):
+    path, out = tiny_study(tmp_path), tmp_path / "out"
+    p = subprocess.Popen([sys.executable, "-m", "casadi_ws.cli", "study", str(path), "--out", str(out), "--quiet"],
+                         cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    t = time.perf_counter()
+    while time.perf_counter() - t < 120:
+        if (out / "trials.csv").is_file() and len(rows(out)) >= 2:
+            break
+        time.sleep(0.05)
+    p.send_signal(signal.SIGKILL)
+    p.wait()
+    done_before = len(rows(out))
+    assert 2 <= done_before < 4, "the study was not killed in the middle"
+    r = cli("study", path, "--out", out, "--resume")
+    assert r.returncode == 0, r.stderr
+    got = rows(out)
+    designs = [(float(g["material.young_modulus"]), float(g["cables[*].u_max"])) for g in got]
+    assert len(got) == 4 and sorted(designs) == [(1.2e7, 60), (1.2e7, 100), (1.8e7, 60), (1.8e7, 100)]
+    assert all(g["status"] == "complete" for g in got)
+    assert len({g["trial"] for g in got}) == 4
+    # resuming a finished study runs nothing
+    r = cli("study", path, "--out", out, "--resume", "--quiet")
+    assert r.returncode == 0 and len(rows(out)) == 4
+
+
+@pytest.mark.slow
+def test_an_optuna_study_with_two_objectives_on_two_workers(tmp_path):
+    # two cables reach a surface: a pick point counts as reached within 1 mm (the study's tolerance)
+    target = [0.0, 0.02, 0.19]
+    path = tiny_study(tmp_path, method="optuna", trials=4, seed=3, target=target, reach_tolerance=1e-3,
+                      variables=[{"path": "material.young_modulus", "range": [1.0e7, 3.0e7], "scale": "log"}],
+                      objectives=[{"maximize": "volume"}, {"minimize": "reach_tension"}])
+    r = cli("study", path, "--out", tmp_path / "out", "--workers", "2", "--quiet")
+    assert r.returncode == 0, r.stderr
+    got = rows(tmp_path / "out")
+    assert len(got) == 4 and all(g["status"] == "complete" for g in got)
+    E = [float(g["material.young_modulus"]) for g in got]
+    assert all(1.0e7 <= e <= 3.0e7 for e in E) and len(set(E)) == 4
+    vol = np.array([float(g["volume"]) for g in got])
+    ten = np.array([float(g["reach_tension"]) for g in got])
+    feas = np.array([g["feasible"] == "1" for g in got])
+    assert np.all(np.array([float(g["reach_error"]) for g in got])[feas] <= 1e-3) and feas.any()
+    pareto = np.array([g["pareto"] == "1" for g in got])
+    for i in np.flatnonzero(pareto):  # no feasible design beats a Pareto design in both objectives
+        assert feas[i]
+        assert not np.any(feas & (vol >= vol[i]) & (ten <= ten[i]) & ((vol > vol[i]) | (ten < ten[i])))
+    for i in np.flatnonzero(feas & ~pareto):
+        assert np.any(feas & (vol >= vol[i]) & (ten <= ten[i]))
+    best = cw.load_problem(tmp_path / "out" / "best.yaml")
+    assert any(pareto[k] and float(got[k]["material.young_modulus"]) == best.material.young_modulus
+               for k in range(4))
+    # the tension a design needs to hold the target: checked against reach on that design
+    k = int(np.argmax(feas))
+    rr = cw.reach(cw.load_problem(tmp_path / "out" / "trials" / f"{int(got[k]['trial']):04d}" / "problem.yaml"), target,
+                  settings=cw.ReachSettings(tolerance=1e-3))
+    assert np.max(rr.u) == pytest.approx(ten[k], rel=1e-6)
+
+
+def test_an_invalid_design_is_recorded_as_failed_and_the_study_goes_on(tmp_path):
+    path = tiny_study(tmp_path, variables=[{"path": "cables[*].trunk_routing.radius", "values": [0.008, 0.05]}],
+                      workspace={"method": "forward", "n_d": 3})
+    res = cw.run_study(cw.load_study(path), tmp_path / "out", progress=False)
+    by = {t.params["cables[*].trunk_routing.radius"]: t for t in res.trials}
+    assert by[0.008].status == "complete"
+    assert by[0.05].status == "failed" and "outside the mesh" in by[0.05].reason
+    assert "cables[0].points" in by[0.05].reason
+    assert res.best.number == by[0.008].number
+
+
+@pytest.mark.parametrize("path", sorted(STUDIES.glob("*.yaml")), ids=lambda p: p.stem)
+def test_a_bad_study_file_is_refused_in_one_line_before_any_trial(path, tmp_path):
+    r = cli("study", path, "--out", tmp_path / "out")
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and r.stderr.startswith("casadi-ws: error: "), r.stderr
+    assert str(path) in r.stderr or "no_such_problem" in r.stderr
+    assert not (tmp_path / "out").exists()
+
+
+EXPECTED = {"01_key_path_missing": "cables has 2 element(s)", "02_key_unknown_to_the_format": "no such key",
+            "03_range_wrong_type": "expected [low, high]", "04_range_reversed": "low < high",
+            "05_unknown_objective": "did you mean 'volume'", "06_reach_without_target": "target",
+            "07_log_range_negative": "log scale", "08_optuna_without_trials": "number of trials",
+            "09_base_problem_missing": "file not found", "10_base_problem_invalid": "poisson_ratio",
+            "11_path_through_a_number": "not a mapping", "12_unknown_study_key": "did you mean 'objectives'"}
+
+
+def test_the_bad_study_corpus_says_what_is_wrong():
+    assert sorted(EXPECTED) == sorted(p.stem for p in STUDIES.glob("*.yaml"))
+    for stem, words in EXPECTED.items():
+        with pytest.raises(cw.ProblemError, match=None) as e:
+            cw.load_study(STUDIES / f"{stem}.yaml")
+        assert words in str(e.value), (stem, str(e.value))
+
+
+def test_an_unreachable_scheduler_fails_before_any_trial(tmp_path):
+    t = time.perf_counter()
+    r = cli("study", tiny_study(tmp_path), "--out", tmp_path / "out", "--scheduler", "tcp://127.0.0.1:9")
+    assert r.returncode == 2 and "tcp://127.0.0.1:9" in r.stderr and r.stderr.count("\n") == 1
+    assert time.perf_counter() - t < 20
+    assert not (tmp_path / "out" / "study.db").exists()
