@@ -172,3 +172,13 @@ def test_an_unreachable_scheduler_fails_before_any_trial(tmp_path):
     assert r.returncode == 2 and "tcp://127.0.0.1:9" in r.stderr and r.stderr.count("\n") == 1
     assert time.perf_counter() - t < 20
     assert not (tmp_path / "out" / "study.db").exists()
+
+
+def test_a_repeated_design_is_recorded_with_its_first_trials_measures_not_recomputed(tmp_path):
+    path = tiny_study(tmp_path, method="optuna", trials=3, variables=[{"path": "cables[*].u_max", "values": [80]}],
+                      workspace={"method": "forward", "n_d": 3})
+    res = cw.run_study(cw.load_study(path), tmp_path / "out", progress=False)
+    assert [t.number for t in res.trials] == [0, 1, 2]
+    assert res.trials[1].measures == res.trials[0].measures and res.trials[1].time_s == 0.0
+    assert "same design as trial 0" in res.trials[2].reason
+    assert not (tmp_path / "out" / "trials" / "0001").exists()

@@ -42,7 +42,12 @@ def study_plot(result, path) -> None:
                     x = [r.params[v.path] for r in group]
                     ax.scatter(x, [scale * r.measures[o.measure] for r in group], s=22, **style)
             if v.log:
+                from matplotlib.ticker import NullFormatter
+
                 ax.set_xscale("log")
+                ax.set_xticks(np.geomspace(v.low, v.high, 3))  # the log formatter's own labels overlap
+                ax.xaxis.set_major_formatter(lambda x, _: f"{x:.3g}")
+                ax.xaxis.set_minor_formatter(NullFormatter())
             if i == len(objs) - 1:
                 ax.set_xlabel(v.path, fontsize=8)
             if j == 0:

@@ -4,7 +4,7 @@ The main process is the only one that talks to the study file: it asks Optuna fo
 design's problem data to a worker (:func:`~casadi_ws.study.trial.run_trial`), and tells Optuna the
 measures when the trial comes back, so a trial is recorded once however the workers fare. A grid study
 enqueues every combination when it starts; an Optuna study asks its sampler (TPE for one objective,
-NSGA-II for several). Trials that were running when a study was killed are marked ``interrupted`` on
+NSGA-II for several, with generations of a quarter of the trials, 4 to 50 designs). Trials that were running when a study was killed are marked ``interrupted`` on
 ``--resume`` and their designs run again; they are not counted and not listed in trials.csv.
 
 Best design: one objective, the best feasible trial; several, the Pareto-optimal feasible trial closest to
@@ -85,7 +85,10 @@ def _sampler(study: Study):
         return optuna.samplers.RandomSampler(seed=study.seed)  # never used: every grid trial is enqueued
     if len(study.objectives) == 1:
         return optuna.samplers.TPESampler(seed=study.seed, constraints_func=constraints)
-    return optuna.samplers.NSGAIISampler(seed=study.seed, constraints_func=constraints)
+    # generations of about a quarter of the trials (Optuna's default, 50, would make a study of a few dozen
+    # trials one random generation)
+    population = max(4, min(50, study.trials // 4))
+    return optuna.samplers.NSGAIISampler(seed=study.seed, population_size=population, constraints_func=constraints)
 
 
 def _open(study: Study, out: Path, resume: bool):
@@ -176,9 +179,10 @@ def _relative_paths(data: dict, base_dir: Path, to: Path) -> dict:
     return data
 
 
-def _write_problem(data: dict, study: Study, directory: Path, name: str) -> Path:
+def _write_problem(data: dict, study: Study, directory: Path, name: str, trial: int) -> Path:
     import yaml
 
+    data = {**data, "name": f"{study.name}_trial{trial}"}  # pictures and summaries say which design they show
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / name
     body = yaml.safe_dump(_relative_paths(data, study.base_dir, directory), sort_keys=False)
@@ -228,6 +232,12 @@ def run_study(study: Study, out, executor=None, resume: bool = False, progress: 
         while True:
             while len(inflight) < max(1, executor.workers) and more():
                 trial = st.ask(dists)
+                same = _same_design(st, trial)
+                if same is not None:  # samplers repeat designs (NSGA-II's crossover of equal parents)
+                    _copy(st, study, trial, same, out)
+                    if bar is not None:
+                        bar.update(1)
+                    continue
                 data = study.problem_data(trial.params)
                 fut = executor.submit(run_trial, data, str(study.base_dir), f"{study.name} (trial {trial.number})",
                                       study.workspace, needed, study.target, study.reach_tolerance)
@@ -257,6 +267,33 @@ def run_study(study: Study, out, executor=None, resume: bool = False, progress: 
     return result
 
 
+def _same_design(st, trial):
+    """A finished trial with exactly these parameters, or None."""
+    import optuna
+
+    S = optuna.trial.TrialState
+    for t in st.get_trials(deepcopy=False, states=(S.COMPLETE, S.FAIL)):
+        if t.number != trial.number and not t.user_attrs.get("interrupted") and t.params == trial.params:
+            return t
+    return None
+
+
+def _copy(st, study: Study, trial, same, out: Path) -> None:
+    """Record a repeated design with the measures of its first trial: workspace runs are deterministic."""
+    import optuna
+
+    for k in ("measures", "constraints"):
+        if k in same.user_attrs:
+            trial.set_user_attr(k, same.user_attrs[k])
+    trial.set_user_attr("time_s", 0.0)
+    trial.set_user_attr("reason", f"same design as trial {same.number}: its measures, not recomputed")
+    if same.state == optuna.trial.TrialState.COMPLETE:
+        st.tell(trial, list(same.values))
+    else:
+        st.tell(trial, state=optuna.trial.TrialState.FAIL)
+    write_trials_csv(_records(st, study), study, out / "trials.csv")
+
+
 def _record(st, study: Study, trial, data: dict, rec: dict, out: Path) -> None:
     import optuna
 
@@ -265,7 +302,7 @@ def _record(st, study: Study, trial, data: dict, rec: dict, out: Path) -> None:
     trial.set_user_attr("time_s", float(rec["time_s"]))
     trial.set_user_attr("reason", rec["reason"])
     d = out / "trials" / f"{trial.number:04d}"
-    _write_problem(data, study, d, "problem.yaml")
+    _write_problem(data, study, d, "problem.yaml", trial.number)
     if rec["result"] is not None:
         rec["result"].save(d)
     if rec["status"] == "complete":
@@ -298,7 +335,7 @@ def write_study_outputs(result: StudyResult) -> None:
         from ..workspace.result import load_result
 
         data = study.problem_data(result.best.params)
-        path = _write_problem(data, study, out, "best.yaml")
+        path = _write_problem(data, study, out, "best.yaml", result.best.number)
         problem = load_problem(path)
         src = out / "trials" / f"{result.best.number:04d}"
         if (src / "summary.json").is_file():
