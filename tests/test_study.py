@@ -6,6 +6,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -69,6 +70,30 @@ def test_a_grid_study_on_dask_reproduces_the_designs_solved_one_by_one(tmp_path)
         assert (tmp_path / "out" / f).is_file(), f
     assert [float(r["volume"]) for r in rows(tmp_path / "out")] == pytest.approx([t.measures["volume"] for t in
                                                                                  sorted(res.trials, key=lambda t: t.number)])
+
+
+@pytest.mark.slow
+def test_a_dask_worker_killed_mid_study_costs_time_only_and_no_trial_is_recorded_twice(tmp_path):
+    import optuna
+
+    study = cw.load_study(tiny_study(tmp_path, workspace={"method": "fb", "step": 0.006}))
+    calm = cw.run_study(study, tmp_path / "serial", progress=False)
+    with cw.DaskExecutor(workers=2) as ex:
+        pids = list(ex.client.run(os.getpid).values())
+        killer = threading.Timer(1.5, os.kill, (pids[0], signal.SIGKILL))
+        killer.start()
+        t = time.perf_counter()
+        res = cw.run_study(study, tmp_path / "dask", executor=ex, progress=False)
+        killer.join()
+        assert time.perf_counter() - t > 1.5  # the kill happened during the study
+    with pytest.raises(ProcessLookupError):
+        for _ in range(50):
+            os.kill(pids[0], 0)
+            time.sleep(0.1)
+    stored = optuna.load_study(study_name="tiny", storage=f"sqlite:///{tmp_path / 'dask' / 'study.db'}").trials
+    assert len(stored) == 4 and all(t.state == optuna.trial.TrialState.COMPLETE for t in stored)
+    key = lambda t: tuple(sorted(t.params.items()))  # noqa: E731
+    assert {key(t): t.measures for t in res.trials} == {key(t): t.measures for t in calm.trials}
 
 
 @pytest.mark.slow

@@ -75,12 +75,20 @@ def _constraints(study: Study, m: dict) -> list[float]:
     return out
 
 
+def _set_constraints(trial, values: list[float]) -> None:
+    trial.set_user_attr("constraints", values)
+    if hasattr(trial, "set_constraint"):  # Optuna >= 5 reads them from the trial (constraints_func is deprecated)
+        for i, v in enumerate(values):
+            trial.set_constraint(f"c{i}", v)
+
+
 def _sampler(study: Study):
     import optuna
 
-    def constraints(frozen):
+    def from_attrs(frozen):
         return frozen.user_attrs.get("constraints", [0.0])
 
+    constraints = None if hasattr(optuna.trial.Trial, "set_constraint") else from_attrs
     if study.method == "grid":
         return optuna.samplers.RandomSampler(seed=study.seed)  # never used: every grid trial is enqueued
     if len(study.objectives) == 1:
@@ -282,9 +290,10 @@ def _copy(st, study: Study, trial, same, out: Path) -> None:
     """Record a repeated design with the measures of its first trial: workspace runs are deterministic."""
     import optuna
 
-    for k in ("measures", "constraints"):
-        if k in same.user_attrs:
-            trial.set_user_attr(k, same.user_attrs[k])
+    if "measures" in same.user_attrs:
+        trial.set_user_attr("measures", same.user_attrs["measures"])
+    if "constraints" in same.user_attrs:
+        _set_constraints(trial, same.user_attrs["constraints"])
     trial.set_user_attr("time_s", 0.0)
     trial.set_user_attr("reason", f"same design as trial {same.number}: its measures, not recomputed")
     if same.state == optuna.trial.TrialState.COMPLETE:
@@ -306,7 +315,7 @@ def _record(st, study: Study, trial, data: dict, rec: dict, out: Path) -> None:
     if rec["result"] is not None:
         rec["result"].save(d)
     if rec["status"] == "complete":
-        trial.set_user_attr("constraints", _constraints(study, m))
+        _set_constraints(trial, _constraints(study, m))
         st.tell(trial, [m[o.measure] for o in study.objectives])
     else:
         st.tell(trial, state=optuna.trial.TrialState.FAIL)
