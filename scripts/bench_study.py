@@ -53,10 +53,13 @@ def main():
         for r in rows:
             lines.append(f"| {r[0]} | {r[1]:.1f} | {rows[0][1] / r[1]:.2f} | {r[2]:.1f} | {r[3]} | {r[4]} | {r[5]} | "
                          f"{r[6]:.0f}, {r[7]:.1f} |")
-        lines += ["", "A trial is a whole workspace run (3–20 s here), so the per-task transfer (~3 ms on Dask, "
-                  "BENCHMARKS \"dask\") is lost in it; the speed-up is bounded by the slowest trials of a "
-                  "generation and by the sampler waiting for results (NSGA-II asks a new design while up to "
-                  "N - 1 are still running)."]
+        lines += ["", "A trial is a whole workspace run (3–10 s here), so the per-task transfer (~3 ms on Dask, "
+                  "BENCHMARKS \"dask\") is lost in it. What costs on 2 cores is CPU: the same trials take "
+                  "longer in two processes than in one (memory bandwidth), and longer still in Dask workers, "
+                  "whose scheduler, nanny and event-loop threads share the two cores; on a cluster with a core "
+                  "per worker that share disappears. With one worker the sampler sees every result before "
+                  "its next design, with two it does not, so the designs after the first generation differ "
+                  "(and so does the best one). `--workers N` uses the process pool; `--scheduler` Dask."]
         write_section("study", "\n".join(lines))
 
 

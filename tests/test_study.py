@@ -207,3 +207,14 @@ def test_a_repeated_design_is_recorded_with_its_first_trials_measures_not_recomp
     assert res.trials[1].measures == res.trials[0].measures and res.trials[1].time_s == 0.0
     assert "same design as trial 0" in res.trials[2].reason
     assert not (tmp_path / "out" / "trials" / "0001").exists()
+
+
+def test_resuming_with_a_changed_study_file_is_refused(tmp_path):
+    path = tiny_study(tmp_path, variables=[{"path": "cables[*].u_max", "values": [80]}],
+                      workspace={"method": "forward", "n_d": 3})
+    assert cli("study", path, "--out", tmp_path / "out", "--quiet").returncode == 0
+    changed = tiny_study(tmp_path, variables=[{"path": "cables[*].u_max", "values": [90]}],
+                         workspace={"method": "forward", "n_d": 3})
+    r = cli("study", changed, "--out", tmp_path / "out", "--resume")
+    assert r.returncode == 2 and "different study file" in r.stderr and r.stderr.count("\n") == 1
+    assert [g["cables[*].u_max"] for g in rows(tmp_path / "out")] == ["80"]

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .spec import MEASURES, Study
+from .spec import MEASURES, Study, StudyError
 from .trial import run_trial
 
 __all__ = ["StudyResult", "TrialRecord", "run_study"]
@@ -104,12 +104,21 @@ def _open(study: Study, out: Path, resume: bool):
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     storage = optuna.storages.RDBStorage(f"sqlite:///{(out / DB).resolve()}")
-    existed = resume and any(s.study_name == study.name for s in optuna.get_all_study_summaries(storage))
+    existed = any(s.study_name == study.name for s in optuna.get_all_study_summaries(storage))
+    if existed and not resume:
+        raise StudyError(str(out / DB), "", f"holds the study {study.name!r} already: resume it, or use another "
+                         f"output directory")
     st = optuna.create_study(storage=storage, study_name=study.name, sampler=_sampler(study),
                              directions=[o.direction for o in study.objectives], load_if_exists=existed)
-    if not existed and study.method == "grid":
-        for design in study.designs():
-            st.enqueue_trial(design)
+    if existed and st.user_attrs.get("fingerprint") != study.fingerprint():
+        raise StudyError(str(out / DB), "", f"the study {study.name!r} there was run from a different study file "
+                         f"(base problem, variables, objectives, workspace, method or seed changed): resuming it "
+                         f"would mix designs; use another output directory")
+    if not existed:
+        st.set_user_attr("fingerprint", study.fingerprint())
+        if study.method == "grid":
+            for design in study.designs():
+                st.enqueue_trial(design)
     rerun = 0
     for t in st.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
         # its process is gone (this is the only process writing the study): run its design again
@@ -160,7 +169,8 @@ def best_trial(recs: list[TrialRecord], study: Study) -> TrialRecord | None:
 
 def write_trials_csv(recs: list[TrialRecord], study: Study, path: Path) -> None:
     names = [m for m in MEASURES if any(m in r.measures and r.measures[m] is not None for r in recs)]
-    with open(path, "w", newline="") as f:
+    tmp = path.with_name(path.name + ".part")
+    with open(tmp, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["trial", "status"] + [v.path for v in study.variables] + names
                    + ["feasible", "pareto", "time_s", "reason"])
@@ -168,6 +178,7 @@ def write_trials_csv(recs: list[TrialRecord], study: Study, path: Path) -> None:
             w.writerow([r.number, r.status] + [r.params.get(v.path) for v in study.variables]
                        + [("" if r.measures.get(m) is None else f"{r.measures[m]:.6g}") for m in names]
                        + [int(r.feasible), int(r.pareto), f"{r.time_s:.2f}", r.reason])
+    os.replace(tmp, path)  # a reader (or a kill) never sees half a table
 
 
 def _relative_paths(data: dict, base_dir: Path, to: Path) -> dict:

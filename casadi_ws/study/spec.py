@@ -187,6 +187,16 @@ class Study:
     def problem_data(self, params: dict) -> dict:
         return apply(self.base, params)
 
+    def fingerprint(self) -> str:
+        """Hash of what decides the trials' answers (not ``trials``: a study may be resumed for more)."""
+        import hashlib
+        import json
+        from dataclasses import asdict
+
+        what = [self.base, [asdict(v) for v in self.variables], [asdict(o) for o in self.objectives],
+                self.constraints, self.workspace, self.method, self.seed, self.target, self.reach_tolerance]
+        return hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()[:20]
+
 
 def _number(r, d, key, where, *, positive=False) -> float:
     v = _as_number(d.get(key))
