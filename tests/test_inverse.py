@@ -2,7 +2,8 @@
 
 
 import numpy as np
-from conftest import coarse_problem_file, run_cli, small_trunk
+import pytest
+from conftest import cantilever, coarse_problem_file, run_cli, small_trunk
 
 from casadi_ws import StaticModel, solve_equilibrium
 from casadi_ws.workspace.forward import ForwardSettings, forward
@@ -120,3 +121,13 @@ def test_reach_with_different_extra_points_of_the_same_count(rng):
         r = reach(m, eq.tip, settings=ReachSettings(extra_points=extra), extra_targets=goal)
         assert r.reachable
         np.testing.assert_allclose((W @ (m.X + r.q)).reshape(-1, 3), goal, atol=1e-6)
+
+
+@pytest.mark.parametrize("model", ["corotational", "neohookean"])
+def test_reach_on_ten_node_elements(model):
+    """IPOPT needs the element Hessians: on 10-node elements they are built per quadrature point (the
+    corotational one was once too large to compile, and then failed to run at all)."""
+    pb = cantilever(n=1, slender=5, model=model, nu=0.3, cable_offset=0.01, order=2)
+    target = solve_equilibrium(StaticModel(pb), np.array([2.0])).tip
+    r = reach(pb, target)
+    assert r.reachable and r.status == 0 and r.u[0] == pytest.approx(2.0, rel=1e-5)

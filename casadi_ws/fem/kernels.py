@@ -30,10 +30,9 @@ import numpy as np
 __all__ = ["ElementBatch", "MAX_COMPILED_CODE", "cache_dir", "have_compiler"]
 
 MAX_COMPILED_CODE = 20_000_000
-"""Generated C larger than this (bytes) is not compiled: the Hessian-vector function of a corotational
-10-node element is 166 MB of C, which gcc had not compiled after 5 minutes at -O1. Such a function runs on
-CasADi's virtual machine instead (slow: an IPOPT problem on an order-2 corotational mesh is impractical;
-use neohookean or the reduced backward there)."""
+"""Generated C larger than this (bytes) is not compiled but run on CasADi's virtual machine (slowly): gcc
+takes minutes on a single function of 100 MB. No shipped kernel is that large any more (the corotational
+10-node Hessian-vector function, once 166 MB, is built per quadrature point: 2.8 MB); the limit is a guard."""
 
 _DRIVER = r"""
 #include <stddef.h>
@@ -125,7 +124,8 @@ class ElementBatch:
                 self._batch = getattr(self._lib, f"{fun.name()}_batch")
                 self._batch.restype = ctypes.c_int
             elif backend == "c":
-                raise RuntimeError("no C compiler found for the 'c' backend")
+                raise RuntimeError(f"{fun.name()}: no C compiler found, or its code is larger than "
+                                   f"MAX_COMPILED_CODE ({MAX_COMPILED_CODE} bytes), for the 'c' backend")
         self.backend = "c" if self._lib is not None else "casadi"
         self._maps: dict[int, ca.Function] = {}
 

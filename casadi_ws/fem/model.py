@@ -300,7 +300,9 @@ class StaticModel:
         d(K^T lam)/du = d(dR/du^T lam)/dq, dense (n_free, n_u)). K^T lam, not K lam: the corotational
         tangent is not exactly symmetric, and this is what reverse-mode AD differentiates."""
         if "_hv" not in self.__dict__:
-            self._hv = ElementBatch(self.hessian_vector_function(), self.backend)
+            # "auto", not "c": a kernel too large to compile (kernels.MAX_COMPILED_CODE) runs in CasADi's VM
+            # even when the others are compiled
+            self._hv = ElementBatch(self.hessian_vector_function(), "casadi" if self.backend == "casadi" else "auto")
         lam_full = np.zeros(self.n_dof)
         lam_full[self.free] = lam
         he, = self._hv(*self._element_inputs(q), lam_full[self._edofs])
