@@ -218,3 +218,16 @@ def test_resuming_with_a_changed_study_file_is_refused(tmp_path):
     r = cli("study", changed, "--out", tmp_path / "out", "--resume")
     assert r.returncode == 2 and "different study file" in r.stderr and r.stderr.count("\n") == 1
     assert [g["cables[*].u_max"] for g in rows(tmp_path / "out")] == ["80"]
+
+
+def test_the_documented_study_file_is_valid(tmp_path):
+    import re
+
+    text = (REPO / "docs" / "studies.md").read_text()
+    block = re.search(r"```yaml\n(.*?)```", text, flags=re.S).group(1)
+    d = yaml.safe_load(block)
+    d["problem"] = str(REPO / "problems" / d["problem"])
+    study = cw.study.study_from_dict(d, "docs/studies.md", tmp_path)
+    assert [v.path for v in study.variables][-1] == "material.model"
+    for design in (study.designs()[0], study.designs()[-1]):  # every listed value is one the format accepts
+        cw.problem_from_dict(study.problem_data(design), "design", REPO / "problems")
