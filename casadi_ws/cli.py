@@ -289,14 +289,11 @@ def cmd_study(args) -> int:
         raise UsageError("--resume and --overwrite contradict each other")
     if args.resume and not (out / DB).is_file():
         print(f"casadi-ws: --resume: no study file in {out}: starting the study", file=sys.stderr)
-    if not args.resume and out.exists() and any(out.iterdir()):
-        if not args.overwrite:
-            raise UsageError(f"--out: {out} already holds files; pass --overwrite to replace them or --resume to "
-                             f"continue an interrupted study")
-        import shutil
-
-        shutil.rmtree(out)
-    if args.scheduler:
+    replace = not args.resume and out.exists() and any(out.iterdir())
+    if replace and not args.overwrite:
+        raise UsageError(f"--out: {out} already holds files; pass --overwrite to replace them or --resume to "
+                         f"continue an interrupted study")
+    if args.scheduler:  # before anything is deleted: an unreachable scheduler must not cost the old results
         executor = _executor(args, None)
     elif args.workers > 1:
         from .runtime.executor import ProcessExecutor
@@ -304,6 +301,10 @@ def cmd_study(args) -> int:
         executor = ProcessExecutor(args.workers)
     else:
         executor = None
+    if replace:
+        import shutil
+
+        shutil.rmtree(out)
     try:
         result = run_study(study, out, executor=executor, resume=args.resume, progress=not args.quiet)
     except KeyboardInterrupt:

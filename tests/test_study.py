@@ -180,7 +180,9 @@ EXPECTED = {"01_key_path_missing": "cables has 2 element(s)", "02_key_unknown_to
             "05_unknown_objective": "did you mean 'volume'", "06_reach_without_target": "target",
             "07_log_range_negative": "log scale", "08_optuna_without_trials": "number of trials",
             "09_base_problem_missing": "file not found", "10_base_problem_invalid": "poisson_ratio",
-            "11_path_through_a_number": "not a mapping", "12_unknown_study_key": "did you mean 'objectives'"}
+            "11_path_through_a_number": "not a mapping", "12_unknown_study_key": "did you mean 'objectives'",
+            "13_index_past_the_list": "no [2]", "14_objective_not_a_name": "unknown objective",
+            "15_workspace_backward_unknown": "reduced, ipopt"}
 
 
 def test_the_bad_study_corpus_says_what_is_wrong():
@@ -217,7 +219,37 @@ def test_resuming_with_a_changed_study_file_is_refused(tmp_path):
                          workspace={"method": "forward", "n_d": 3})
     r = cli("study", changed, "--out", tmp_path / "out", "--resume")
     assert r.returncode == 2 and "different study file" in r.stderr and r.stderr.count("\n") == 1
+    renamed = tiny_study(tmp_path, name="other", variables=[{"path": "cables[*].u_max", "values": [80]}],
+                         workspace={"method": "forward", "n_d": 3})
+    r = cli("study", renamed, "--out", tmp_path / "out", "--resume")
+    assert r.returncode == 2 and "holds the study 'tiny', not 'other'" in r.stderr
     assert [g["cables[*].u_max"] for g in rows(tmp_path / "out")] == ["80"]
+
+
+def test_a_resumed_optuna_study_proposes_new_designs_not_the_ones_it_ran(tmp_path):
+    kw = dict(method="optuna", seed=5, variables=[{"path": "cables[*].u_max", "range": [50.0, 100.0]}],
+              workspace={"method": "forward", "n_d": 3})
+    cw.run_study(cw.load_study(tiny_study(tmp_path, trials=2, **kw)), tmp_path / "out", progress=False)
+    res = cw.run_study(cw.load_study(tiny_study(tmp_path, trials=4, **kw)), tmp_path / "out", resume=True,
+                       progress=False)
+    assert len(res.trials) == 4 and not any("same design" in t.reason for t in res.trials)
+    assert len({t.params["cables[*].u_max"] for t in res.trials}) == 4
+
+
+def _die():
+    os._exit(3)
+
+
+def test_a_process_pool_that_lost_a_worker_restarts():
+    from concurrent.futures import BrokenExecutor
+
+    with cw.ProcessExecutor(1) as ex:
+        with pytest.raises(BrokenExecutor):
+            ex.submit(_die).result()
+        with pytest.raises(BrokenExecutor):
+            ex.submit(abs, -1)
+        ex.restart()
+        assert ex.submit(abs, -1).result() == 1
 
 
 def test_the_documented_study_file_is_valid(tmp_path):

@@ -112,6 +112,9 @@ class Executor:
         done, pending = wait(futures, return_when=FIRST_COMPLETED)
         return set(done), set(pending)
 
+    def restart(self) -> None:
+        """Start over after a worker was lost (a process pool breaks when one of its processes dies)."""
+
     def close(self) -> None:
         pass
 
@@ -178,9 +181,16 @@ class ProcessExecutor(Executor):
         for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ.setdefault(var, "1")  # inherited by the children before they import numpy
         self._key = None if problem is None else problem_fingerprint(problem)
-        blob = None if problem is None else pickle.dumps(problem, protocol=4)
-        self._pool = ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"), initializer=_init_worker,
-                                         initargs=(self._key, blob))
+        self._blob = None if problem is None else pickle.dumps(problem, protocol=4)
+        self._pool = self._start()
+
+    def _start(self):
+        return ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"), initializer=_init_worker,
+                                   initargs=(self._key, self._blob))
+
+    def restart(self) -> None:
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        self._pool = self._start()
 
     def map_unordered(self, fn, problem, jobs):
         key = problem_fingerprint(problem)

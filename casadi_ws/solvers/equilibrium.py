@@ -84,14 +84,18 @@ def factorize(K) -> object:
     # threshold keeps the fill-reducing ordering of A + A^T (measured ~10 % faster than COLAMD here).
     K = K.tocsc() if not sp.isspmatrix_csc(K) else K
     opts = dict(diag_pivot_thresh=0.01, options={"SymmetricMode": True})
+    if not K.has_sorted_indices:
+        return sla.splu(K, permc_spec="MMD_AT_PLUS_A", **opts)
     for o in _ORDERINGS:
         if o.matches(K):
-            return _PermutedLU(sla.splu(o.permute(K), permc_spec="NATURAL", **opts), o.p)
-    lu = sla.splu(K, permc_spec="MMD_AT_PLUS_A", **opts)
-    if K.has_sorted_indices:
-        _ORDERINGS.insert(0, _Ordering(K, lu.perm_c))
+            break
+    else:
+        # the first time: the ordering only; the factorisation below is the same as every later one, so a
+        # result does not depend on which factorisation of the pattern came first in this process
+        o = _Ordering(K, sla.splu(K, permc_spec="MMD_AT_PLUS_A", **opts).perm_c)
+        _ORDERINGS.insert(0, o)
         del _ORDERINGS[4:]  # a few models per process (a design study's worker builds many)
-    return lu
+    return _PermutedLU(sla.splu(o.permute(K), permc_spec="NATURAL", **opts), o.p)
 
 
 def tangent_factorization(model, q: np.ndarray, u: np.ndarray) -> Factorization:

@@ -19,6 +19,7 @@ import math
 import os
 import sys
 import time
+from concurrent.futures import BrokenExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -82,7 +83,9 @@ def _set_constraints(trial, values: list[float]) -> None:
             trial.set_constraint(f"c{i}", v)
 
 
-def _sampler(study: Study):
+def _sampler(study: Study, done: int = 0):
+    """``done``: trials already in the study (a resumed sampler is re-seeded, or its seeded stream would
+    propose the designs it proposed before the interruption once more)."""
     import optuna
 
     def from_attrs(frozen):
@@ -92,11 +95,12 @@ def _sampler(study: Study):
     if study.method == "grid":
         return optuna.samplers.RandomSampler(seed=study.seed)  # never used: every grid trial is enqueued
     if len(study.objectives) == 1:
-        return optuna.samplers.TPESampler(seed=study.seed, constraints_func=constraints)
+        return optuna.samplers.TPESampler(seed=study.seed + done, constraints_func=constraints)
     # generations of about a quarter of the trials (Optuna's default, 50, would make a study of a few dozen
     # trials one random generation)
     population = max(4, min(50, study.trials // 4))
-    return optuna.samplers.NSGAIISampler(seed=study.seed, population_size=population, constraints_func=constraints)
+    return optuna.samplers.NSGAIISampler(seed=study.seed + done, population_size=population,
+                                         constraints_func=constraints)
 
 
 def _open(study: Study, out: Path, resume: bool):
@@ -104,11 +108,16 @@ def _open(study: Study, out: Path, resume: bool):
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     storage = optuna.storages.RDBStorage(f"sqlite:///{(out / DB).resolve()}")
-    existed = any(s.study_name == study.name for s in optuna.get_all_study_summaries(storage))
+    names = [s.study_name for s in optuna.get_all_study_summaries(storage)]
+    existed = study.name in names
+    if names and not existed:
+        raise StudyError(str(out / DB), "", f"holds the study {names[0]!r}, not {study.name!r}: use another output "
+                         f"directory")
     if existed and not resume:
         raise StudyError(str(out / DB), "", f"holds the study {study.name!r} already: resume it, or use another "
                          f"output directory")
-    st = optuna.create_study(storage=storage, study_name=study.name, sampler=_sampler(study),
+    done = len(optuna.load_study(study_name=study.name, storage=storage).trials) if existed else 0
+    st = optuna.create_study(storage=storage, study_name=study.name, sampler=_sampler(study, done),
                              directions=[o.direction for o in study.objectives], load_if_exists=existed)
     if existed and st.user_attrs.get("fingerprint") != study.fingerprint():
         raise StudyError(str(out / DB), "", f"the study {study.name!r} there was run from a different study file "
@@ -116,16 +125,26 @@ def _open(study: Study, out: Path, resume: bool):
                          f"would mix designs; use another output directory")
     if not existed:
         st.set_user_attr("fingerprint", study.fingerprint())
-        if study.method == "grid":
-            for design in study.designs():
-                st.enqueue_trial(design)
     rerun = 0
     for t in st.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
         # its process is gone (this is the only process writing the study): run its design again
         st._storage.set_trial_user_attr(t._trial_id, "interrupted", True)
         st.tell(t.number, state=optuna.trial.TrialState.FAIL)
-        st.enqueue_trial(t.params)
+        if study.method != "grid":  # (a grid's missing designs are queued below)
+            st.enqueue_trial(t.params)
         rerun += 1
+    if study.method == "grid":
+        # every design not finished or queued yet: all of them at the start; on resume, those an interruption
+        # lost (killed while queueing, or running)
+        S = optuna.trial.TrialState
+        have = [t.params for t in st.get_trials(deepcopy=False, states=(S.COMPLETE,))]
+        # a queued trial has no params yet: Optuna keeps the design it will get as "fixed_params"
+        have += [t.system_attrs.get("fixed_params", {}) for t in st.get_trials(deepcopy=False, states=(S.WAITING,))]
+        have += [t.params for t in st.get_trials(deepcopy=False, states=(S.FAIL,))
+                 if not t.user_attrs.get("interrupted")]
+        for design in study.designs():
+            if design not in have:
+                st.enqueue_trial(design)
     return st, rerun
 
 
@@ -258,8 +277,13 @@ def run_study(study: Study, out, executor=None, resume: bool = False, progress: 
                         bar.update(1)
                     continue
                 data = study.problem_data(trial.params)
-                fut = executor.submit(run_trial, data, str(study.base_dir), f"{study.name} (trial {trial.number})",
-                                      study.workspace, needed, study.target, study.reach_tolerance)
+                job = (run_trial, data, str(study.base_dir), f"{study.name} (trial {trial.number})",
+                       study.workspace, needed, study.target, study.reach_tolerance)
+                try:
+                    fut = executor.submit(*job)
+                except BrokenExecutor:  # a worker process died (a crash, out of memory): start new ones
+                    executor.restart()
+                    fut = executor.submit(*job)
                 inflight[fut] = (trial, data)
             if not inflight:
                 break
@@ -269,8 +293,9 @@ def run_study(study: Study, out, executor=None, resume: bool = False, progress: 
                 try:
                     rec = fut.result()
                 except Exception as exc:  # noqa: BLE001 - a worker lost or a crash: recorded, the study goes on
-                    rec = {"status": "failed", "reason": f"{type(exc).__name__}: {exc}", "measures": {},
-                           "time_s": 0.0, "result": None}
+                    why = "a worker process died running it" if isinstance(exc, BrokenExecutor) else \
+                        f"{type(exc).__name__}: {exc}"
+                    rec = {"status": "failed", "reason": why, "measures": {}, "time_s": 0.0, "result": None}
                 _record(st, study, trial, data, rec, out)
                 if bar is not None:
                     recs = _records(st, study)
@@ -306,7 +331,9 @@ def _copy(st, study: Study, trial, same, out: Path) -> None:
     if "constraints" in same.user_attrs:
         _set_constraints(trial, same.user_attrs["constraints"])
     trial.set_user_attr("time_s", 0.0)
-    trial.set_user_attr("reason", f"same design as trial {same.number}: its measures, not recomputed")
+    why = same.user_attrs.get("reason", "")
+    trial.set_user_attr("reason", f"same design as trial {same.number}: its measures, not recomputed"
+                        + (f" ({why})" if why else ""))
     if same.state == optuna.trial.TrialState.COMPLETE:
         st.tell(trial, list(same.values))
     else:

@@ -104,6 +104,12 @@ def _containers(data, keys: list, where: str):
             raise ValueError(f"{_show(keys[:-1])} is not a mapping in {where}")
         if (last == "*" or isinstance(last, int)) and not isinstance(c, list):
             raise ValueError(f"{_show(keys[:-1])} is not a list in {where}")
+        if isinstance(last, int) and not -len(c) <= last < len(c):
+            raise ValueError(f"{_show(keys[:-1])} has {len(c)} element(s) in {where}, no [{last}]")
+        if last == "*" and not c:
+            raise ValueError(f"{_show(keys[:-1])} is empty in {where}: [*] would set nothing")
+    if "*" in keys and not level:
+        raise ValueError(f"{_show(keys)}: [*] over an empty list in {where} sets nothing")
     return level
 
 
@@ -113,10 +119,10 @@ def apply(data: dict, assignments: dict) -> dict:
     for path, value in assignments.items():
         keys = parse_path(path)
         for c in _containers(out, keys, "the problem"):
-            if keys[-1] == "*":
-                c[:] = [value] * len(c)
+            if keys[-1] == "*":  # a copy each: a later path must not edit them all through one object
+                c[:] = [copy.deepcopy(value) for _ in c]
             else:
-                c[keys[-1]] = value
+                c[keys[-1]] = copy.deepcopy(value)
     return out
 
 
@@ -313,7 +319,7 @@ def study_from_dict(d, source: str = "<study>", base_dir: Path | None = None) ->
         if not isinstance(o, dict) or len(o) != 1 or next(iter(o)) not in ("maximize", "minimize"):
             fail(f"objectives[{i}]", f"expected {{maximize: MEASURE}} or {{minimize: MEASURE}}, got {o!r}")
         direction, measure = next(iter(o.items()))
-        if measure not in MEASURES:
+        if not isinstance(measure, str) or measure not in MEASURES:
             close = difflib.get_close_matches(str(measure), sorted(MEASURES), n=1)
             fail(f"objectives[{i}].{direction}", f"unknown objective {measure!r}"
                  + (f" (did you mean '{close[0]}'?)" if close else "") + f"; expected one of: {', '.join(MEASURES)}")
@@ -326,7 +332,7 @@ def study_from_dict(d, source: str = "<study>", base_dir: Path | None = None) ->
         key = f"constraints[{i}]"
         if not isinstance(c, dict) or "measure" not in c or not set(c) - {"measure"} or set(c) - {"measure", "min", "max"}:
             fail(key, f"expected {{measure: NAME, min: VALUE and/or max: VALUE}}, got {c!r}")
-        if c["measure"] not in MEASURES:
+        if not isinstance(c["measure"], str) or c["measure"] not in MEASURES:
             fail(f"{key}.measure", f"unknown measure {c['measure']!r}; expected one of: {', '.join(MEASURES)}")
         constraints.append((c["measure"], _number(fail, c, "min", key) if "min" in c else None,
                             _number(fail, c, "max", key) if "max" in c else None))
@@ -351,22 +357,27 @@ def study_from_dict(d, source: str = "<study>", base_dir: Path | None = None) ->
     workspace = {k: v for k, v in workspace.items() if k in _WORKSPACE_KEYS}
     if workspace["method"] not in ("forward", "fb"):
         fail("workspace.method", f"expected forward or fb, got {workspace['method']!r}")
-    for k in ("step",):
-        if k in workspace:
-            _number(fail, workspace, k, "workspace", positive=True)
-    if "n_d" in workspace and (not isinstance(workspace["n_d"], int) or workspace["n_d"] < 1):
-        fail("workspace.n_d", f"expected an integer >= 1, got {workspace['n_d']!r}")
+    if "step" in workspace:  # stored as numbers: PyYAML reads 6e-3 as a string
+        workspace["step"] = _number(fail, workspace, "step", "workspace", positive=True)
+    if "n_d" in workspace:
+        n_d = _as_number(workspace["n_d"])
+        if isinstance(n_d, bool) or not isinstance(n_d, (int, float)) or n_d != int(n_d) or n_d < 1:
+            fail("workspace.n_d", f"expected an integer >= 1, got {workspace['n_d']!r}")
+        workspace["n_d"] = int(n_d)
+    for key, allowed in (("strategy", ("uniform", "relative")), ("backward", ("reduced", "ipopt"))):
+        if key in workspace and workspace[key] not in allowed:
+            fail(f"workspace.{key}", f"expected one of {', '.join(allowed)}, got {workspace[key]!r}")
 
     needed = [o.measure for o in objs] + [c[0] for c in constraints]
     target = d.get("target")
     target = [_as_number(x) for x in target] if isinstance(target, list) else target
     if any(m.startswith("reach_") for m in needed):
         if (not isinstance(target, list) or len(target) != 3
-                or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in target)):
+                or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) for x in target)):
             fail("target", f"the reach_* measures need a target point [x, y, z] in metres, got {target!r}")
     if "task_share" in needed and base.get("task") is None:
         fail("objectives", "task_share needs a task region: add 'task' to the base problem or the study's 'set'")
-    tol = d.get("reach_tolerance", 1e-4)
+    tol = _as_number(d.get("reach_tolerance", 1e-4))
     if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not tol > 0:
         fail("reach_tolerance", f"expected a positive distance in metres, got {tol!r}")
     return Study(str(d.get("name", Path(source).stem)), source, base, problem_path.parent, variables, objs,

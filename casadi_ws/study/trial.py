@@ -62,7 +62,7 @@ def run_trial(data: dict, base_dir: str, source: str, workspace: dict, needed: l
         if result.n_points == 0:
             return {"status": "failed", "reason": "no verified equilibrium: the workspace is empty",
                     "measures": out, "time_s": time.perf_counter() - t0, "result": result}
-        missing = [k for k in needed if out.get(k) is None]
+        missing = [k for k in needed if out.get(k) is None or not np.isfinite(out[k])]
         if missing:
             return {"status": "failed", "reason": f"measure(s) {', '.join(missing)} undefined for this design",
                     "measures": out, "time_s": time.perf_counter() - t0, "result": result}
