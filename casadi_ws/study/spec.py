@@ -254,21 +254,10 @@ def _variable(fail, v, i: int, base: dict, base_name: str) -> Variable:
     return Variable(str(v["path"]), lo, hi, log=scale == "log", n=n)
 
 
-def study_from_dict(d, source: str = "<study>", base_dir: Path | None = None) -> Study:
-    """Validate a study given as plain data; every error here is raised before any trial runs."""
+def _read_base(fail, d: dict, base_dir: Path) -> tuple[dict, Path]:
+    """The base problem's data with the study's ``set`` changes, and its file; it must be valid."""
     import yaml
 
-    def fail(key, message):
-        raise StudyError(source, key, message)
-
-    base_dir = Path(base_dir or Path.cwd())
-    if not isinstance(d, dict):
-        fail("", f"expected a mapping at the top level, got {type(d).__name__}")
-    for k in d:
-        if k not in _STUDY_KEYS:
-            close = difflib.get_close_matches(str(k), sorted(_STUDY_KEYS), n=1)
-            fail(str(k), "unknown key" + (f" (did you mean '{close[0]}'?)" if close else "")
-                 + f"; expected one of: {', '.join(sorted(_STUDY_KEYS))}")
     if "problem" not in d:
         fail("problem", "missing: the base problem file, relative to the study file")
     problem_path = (base_dir / str(d["problem"])).resolve()
@@ -295,7 +284,10 @@ def study_from_dict(d, source: str = "<study>", base_dir: Path | None = None) ->
     except ProblemError as exc:
         fail("set" if sets else "problem", f"the base problem{' with these changes' if sets else ''} is invalid: "
              f"{problem_path.name}: {exc.key}: {exc.message}")
+    return base, problem_path
 
+
+def _read_variables(fail, d: dict, base: dict, problem_path: Path) -> list[Variable]:
     variables = d.get("variables")
     if not isinstance(variables, list) or not variables:
         fail("variables", "expected a non-empty list of {path, range | values}")
@@ -310,7 +302,10 @@ def study_from_dict(d, source: str = "<study>", base_dir: Path | None = None) ->
         except ProblemError as exc:
             if "unknown key" in exc.message:
                 fail(f"variables[{i}].path", f"{v.path}: the problem format has no such key ({exc.message})")
+    return variables
 
+
+def _read_objectives(fail, d: dict) -> tuple[list[Objective], list]:
     objectives = d.get("objectives")
     if not isinstance(objectives, list) or not objectives:
         fail("objectives", "expected a list such as [{maximize: volume}, {minimize: reach_tension}]")
@@ -336,20 +331,11 @@ def study_from_dict(d, source: str = "<study>", base_dir: Path | None = None) ->
             fail(f"{key}.measure", f"unknown measure {c['measure']!r}; expected one of: {', '.join(MEASURES)}")
         constraints.append((c["measure"], _number(fail, c, "min", key) if "min" in c else None,
                             _number(fail, c, "max", key) if "max" in c else None))
+    return objs, constraints
 
-    method = d.get("method", "grid")
-    if method not in ("grid", "optuna"):
-        fail("method", f"expected grid or optuna, got {method!r}")
-    trials = d.get("trials")
-    if method == "optuna":
-        if isinstance(trials, bool) or not isinstance(trials, int) or trials < 1:
-            fail("trials", f"an optuna study needs the number of trials, an integer >= 1, got {trials!r}")
-    elif trials is not None:
-        fail("trials", "a grid study runs every combination; 'trials' is for method: optuna")
-    seed = d.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int):
-        fail("seed", f"expected an integer, got {seed!r}")
 
+def _read_workspace(fail, d: dict, base: dict) -> dict:
+    """The workspace run of every trial: the study's settings over the base problem's, numbers normalised."""
     w = d.get("workspace") or {}
     if not isinstance(w, dict) or set(w) - _WORKSPACE_KEYS:
         fail("workspace", f"expected a mapping with keys among {', '.join(sorted(_WORKSPACE_KEYS))}, got {w!r}")
@@ -367,6 +353,39 @@ def study_from_dict(d, source: str = "<study>", base_dir: Path | None = None) ->
     for key, allowed in (("strategy", ("uniform", "relative")), ("backward", ("reduced", "ipopt"))):
         if key in workspace and workspace[key] not in allowed:
             fail(f"workspace.{key}", f"expected one of {', '.join(allowed)}, got {workspace[key]!r}")
+    return workspace
+
+
+def study_from_dict(d, source: str = "<study>", base_dir: Path | None = None) -> Study:
+    """Validate a study given as plain data; every error here is raised before any trial runs."""
+
+    def fail(key, message):
+        raise StudyError(source, key, message)
+
+    base_dir = Path(base_dir or Path.cwd())
+    if not isinstance(d, dict):
+        fail("", f"expected a mapping at the top level, got {type(d).__name__}")
+    for k in d:
+        if k not in _STUDY_KEYS:
+            close = difflib.get_close_matches(str(k), sorted(_STUDY_KEYS), n=1)
+            fail(str(k), "unknown key" + (f" (did you mean '{close[0]}'?)" if close else "")
+                 + f"; expected one of: {', '.join(sorted(_STUDY_KEYS))}")
+    base, problem_path = _read_base(fail, d, base_dir)
+    variables = _read_variables(fail, d, base, problem_path)
+    objs, constraints = _read_objectives(fail, d)
+    method = d.get("method", "grid")
+    if method not in ("grid", "optuna"):
+        fail("method", f"expected grid or optuna, got {method!r}")
+    trials = d.get("trials")
+    if method == "optuna":
+        if isinstance(trials, bool) or not isinstance(trials, int) or trials < 1:
+            fail("trials", f"an optuna study needs the number of trials, an integer >= 1, got {trials!r}")
+    elif trials is not None:
+        fail("trials", "a grid study runs every combination; 'trials' is for method: optuna")
+    seed = d.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        fail("seed", f"expected an integer, got {seed!r}")
+    workspace = _read_workspace(fail, d, base)
 
     needed = [o.measure for o in objs] + [c[0] for c in constraints]
     target = d.get("target")
