@@ -576,20 +576,26 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
                    source, regions, task, partial_fixed)
 
 
-def load_problem(path: str | Path) -> Problem:
-    """Read and validate a YAML problem file."""
+def read_yaml(path: str | Path, what: str = "problem file", error=None):
+    """The data of a YAML file; a missing or malformed file is ``error`` (a ProblemError class) naming it."""
     import yaml
 
+    error = error or ProblemError
     path = Path(path)
     if not path.is_file():
-        raise ProblemError(str(path), "", "problem file not found")
+        raise error(str(path), "", f"{what} not found")
     try:
-        data = yaml.safe_load(path.read_text())
+        return yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
-        raise ProblemError(str(path), "", f"malformed YAML: {where}{getattr(exc, 'problem', exc)}") from None
-    return problem_from_dict(data, str(path), path.parent)
+        raise error(str(path), "", f"malformed YAML: {where}{getattr(exc, 'problem', exc)}") from None
+
+
+def load_problem(path: str | Path) -> Problem:
+    """Read and validate a YAML problem file."""
+    path = Path(path)
+    return problem_from_dict(read_yaml(path), str(path), path.parent)
 
 
 DEFAULT_PROBLEM = {

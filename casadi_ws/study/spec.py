@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.problem import ProblemError, _as_number, problem_from_dict
+from ..io.problem import ProblemError, _as_number, problem_from_dict, read_yaml
 
 __all__ = ["MEASURES", "Objective", "Study", "StudyError", "Variable", "apply", "load_study", "study_from_dict"]
 
@@ -256,17 +256,15 @@ def _variable(fail, v, i: int, base: dict, base_name: str) -> Variable:
 
 def _read_base(fail, d: dict, base_dir: Path) -> tuple[dict, Path]:
     """The base problem's data with the study's ``set`` changes, and its file; it must be valid."""
-    import yaml
-
     if "problem" not in d:
         fail("problem", "missing: the base problem file, relative to the study file")
     problem_path = (base_dir / str(d["problem"])).resolve()
     if not problem_path.is_file():
         fail("problem", f"file not found: {problem_path}")
     try:
-        base = yaml.safe_load(problem_path.read_text())
-    except yaml.YAMLError as exc:
-        fail("problem", f"{problem_path}: malformed YAML ({getattr(exc, 'problem', exc)})")
+        base = read_yaml(problem_path)
+    except ProblemError as exc:
+        fail("problem", f"{problem_path}: {exc.message}")
     if not isinstance(base, dict):
         fail("problem", f"{problem_path}: not a problem file (expected a mapping)")
     sets = d.get("set") or {}
@@ -405,13 +403,5 @@ def study_from_dict(d, source: str = "<study>", base_dir: Path | None = None) ->
 
 def load_study(path) -> Study:
     """Read and validate a study file."""
-    import yaml
-
     path = Path(path)
-    if not path.is_file():
-        raise StudyError(str(path), "", "study file not found")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise StudyError(str(path), "", f"malformed YAML: {getattr(exc, 'problem', exc)}") from None
-    return study_from_dict(data, str(path), path.parent)
+    return study_from_dict(read_yaml(path, "study file", StudyError), str(path), path.parent)
