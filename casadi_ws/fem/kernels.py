@@ -5,7 +5,10 @@ Two backends give the same numbers:
 
 ``c``       CasADi generates C for the element function; a ten-line C loop calls it once per element on
             numpy's memory directly (ctypes, no copies). The shared library is cached on disk under a hash
-            of the generated code, so it is compiled once per machine and reused by every run and process.
+            of the generated code and of the CPU, so it is compiled once per machine and reused by every
+            run and process. It is built for this CPU's instruction set (``-march=native``: the
+            corotational stiffness runs ~1.8x faster with its vector and fused multiply-add
+            instructions), so a cache shared between machines keeps one library per kind of CPU.
 ``casadi``  ``Function.map`` evaluated by CasADi's virtual machine, with numpy <-> DM conversions. No
             compiler needed; ~10x slower on the stiffness, mostly in the conversions.
 
@@ -17,8 +20,10 @@ The cache directory is ``$CASADI_WS_CACHE`` if set, else ``$XDG_CACHE_HOME/casad
 from __future__ import annotations
 
 import ctypes
+import functools
 import hashlib
 import os
+import platform
 import shutil
 import subprocess
 import tempfile
@@ -72,6 +77,17 @@ def have_compiler() -> bool:
     return _compiler() is not None
 
 
+@functools.cache
+def _cpu() -> str:
+    """What ``-march=native`` compiles for: the CPU's model and instruction-set flags."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            lines = [ln for ln in f if ln.startswith(("model name", "flags", "Features", "CPU part"))]
+        return platform.machine() + "".join(dict.fromkeys(lines))
+    except OSError:
+        return platform.machine() + platform.processor()
+
+
 def _build(fun: ca.Function) -> Path | None:
     cc = _compiler()
     if cc is None:
@@ -82,7 +98,7 @@ def _build(fun: ca.Function) -> Path | None:
         cg.add(fun)
         code = Path(cg.generate(tmp + os.sep)).read_text()
     code += _DRIVER.format(name=name)
-    key = hashlib.sha256((code + ca.__version__).encode()).hexdigest()[:16]
+    key = hashlib.sha256((code + ca.__version__ + _cpu()).encode()).hexdigest()[:16]
     lib = cache_dir() / f"{name}_{key}.so"
     if lib.exists():
         return lib
@@ -95,9 +111,12 @@ def _build(fun: ca.Function) -> Path | None:
         # gcc's -O2 time grows faster than linearly with one huge straight-line function: the stiffness of
         # a corotational 10-node element (2.5 MB of C) took ~4 min at -O2 and 7 s at -O1
         opt = "-O2" if len(code) < 500_000 else "-O1"
-        res = subprocess.run([cc, opt, "-fPIC", "-shared", str(src), "-o", str(part), "-lm"],
-                             capture_output=True, text=True)
-        if res.returncode != 0:
+        for arch in (["-march=native"], []):  # a compiler that does not know -march=native: the generic build
+            res = subprocess.run([cc, opt, *arch, "-fPIC", "-shared", str(src), "-o", str(part), "-lm"],
+                                 capture_output=True, text=True)
+            if res.returncode == 0:
+                break
+        else:
             return None
         os.replace(part, lib)  # atomic: a concurrent process never loads a half-written library
         return lib
