@@ -1,19 +1,86 @@
-"""Sensitivities of an equilibrium and the bounded linear least-squares step built on them."""
+"""Sensitivities of an equilibrium (first and second derivatives of q(u)) and the bounded linear
+least-squares step built on them."""
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["bounded_step", "closest_to_box", "sensitivity"]
+__all__ = ["bounded_step", "closest_to_box", "curvature", "second_order", "sensitivity"]
 
 
-def sensitivity(model, q, fac) -> tuple[np.ndarray, np.ndarray]:
-    """(A, S): A = C K^-1 H^T (3 x n_u), S = K^-1 H^T = dq/du on the free dofs (n_free x n_u)."""
+def sensitivity(model, q, fac, K=None) -> tuple[np.ndarray, np.ndarray]:
+    """(A, S): A = C K^-1 H^T (3 x n_u), S = K^-1 H^T = dq/du on the free dofs (n_free x n_u).
+
+    ``K``: the tangent at q, when ``fac`` was computed near q but not at it: one step of iterative
+    refinement then brings S to K's own (an LU one Newton iterate away leaves A ~1 % off; the predictors
+    built on S need it closer, see :func:`curvature`).
+    """
     H = model.actuation_matrix(q)  # (n_u, n_free), H = -dL/dq
+    if not model.n_u:
+        return np.zeros((3, 0)), np.zeros((model.n_free, 0))
+    HT = np.ascontiguousarray(H.T)
     # one solve with n_u right-hand sides reads the factors once (they do not fit in cache)
+    S = fac.solve(HT)
+    if K is not None:
+        S = S + fac.solve(HT - K @ S)
     # (C order, as a checkpoint restores it: the products with S then round the same way after a resume)
-    S = np.ascontiguousarray(fac.solve(np.ascontiguousarray(H.T))) if model.n_u else np.zeros((model.n_free, 0))
+    S = np.ascontiguousarray(S)
     return model.C_free @ S, S
+
+
+def curvature(model, q, u, S, fac, tip_step: float, K=None) -> np.ndarray:
+    """Q: the second derivatives d2q/du_i du_j (i <= j, row-major; n_u(n_u+1)/2 x n_free, float32) of
+    the equilibrium path at (q, u), so that q(u + du) = q + S du + Q(du, du)/2 + O(|du|^3).
+
+    Why: the linear predictor q + S du stretches the elements that rotate (by ~theta^2), which in a slender
+    body leaves a relative residual ~1 for a one-cell move; an LU at that state has a tangent ~50 % off
+    the answer's, so Newton needs a second LU. With the second-order term the residual is ~4e-3 and one LU
+    suffices (docs/methods.md). Differentiating R(q(u), u) = 0 twice: K Q(d, d) = -D2R[(S d, d)]^2, the
+    second directional derivative along the path's tangent, taken by central differences
+    R(q + S d, u + d) + R(q - S d, u - d) (odd orders cancel; one-sided ones were useless), with input
+    increments that move the tip by a tenth of ``tip_step`` (the grid step; 0.01-0.25 of it measured the
+    same); pairs by polarisation. n_u(n_u+1) residuals and one solve. float32: a predictor needs no
+    more, and it halves what travels between processes and what a checkpoint holds. ``K`` as in
+    :func:`sensitivity`: without that refinement the errors of Q and of the LU at its predictor feed each
+    other from one configuration to the next.
+    """
+    n = S.shape[1]
+    reach = np.linalg.norm(model.C_free @ S, axis=0)  # tip movement per unit input
+    h = np.where(reach > 0, 0.1 * tip_step / np.where(reach > 0, reach, 1.0),
+                 1e-3 * np.maximum(model.u_max - model.u_min, 1.0))
+
+    def second_difference(d):
+        dq = S @ d
+        qp, qm = q.copy(), q.copy()
+        qp[model.free] += dq
+        qm[model.free] -= dq
+        return model.residual(qp, u + d) + model.residual(qm, u - d)
+
+    diag = [second_difference(h[i] * np.eye(n)[i]) for i in range(n)]
+    cols = []
+    for i in range(n):
+        for j in range(i, n):
+            if i == j:
+                cols.append(diag[i] / h[i] ** 2)
+            else:
+                d = np.zeros(n)
+                d[i], d[j] = h[i], h[j]
+                cols.append((second_difference(d) - diag[i] - diag[j]) / (2.0 * h[i] * h[j]))
+    if not cols:
+        return np.zeros((0, S.shape[0]), dtype=np.float32)
+    B = np.column_stack(cols)
+    Q = -fac.solve(B)
+    if K is not None:
+        Q = Q - fac.solve(B + K @ Q)
+    return np.ascontiguousarray(Q.T, dtype=np.float32)
+
+
+def second_order(Q: np.ndarray, du: np.ndarray) -> np.ndarray:
+    """Q(du, du) / 2 on the free dofs: the second-order term of the predictor q + S du (see :func:`curvature`)."""
+    n = du.size
+    i, j = np.triu_indices(n)
+    w = np.where(i == j, 0.5, 1.0) * du[i] * du[j]
+    return w @ Q.astype(float) if Q.size else np.zeros(Q.shape[1])
 
 
 def bounded_step(A: np.ndarray, r: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

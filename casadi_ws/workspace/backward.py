@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..solvers.equilibrium import CONVERGED, Factorization, solve_equilibrium, tangent_factorization
-from ..solvers.sensitivity import bounded_step, closest_to_box, sensitivity
+from ..solvers.sensitivity import bounded_step, closest_to_box, second_order, sensitivity
 from ..status import Status
 
 __all__ = ["BackwardResult", "BackwardSettings", "backward"]
@@ -94,7 +94,9 @@ def backward(model, target, q, u, fac: Factorization | None = None, scale: float
              settings: BackwardSettings | None = None, sens=None) -> BackwardResult:
     """Solve (8) for ``target`` from the equilibrium (q, u); ``scale`` is a length (the grid step).
 
-    ``sens`` = (A, S) at (q, u), if known (see :func:`casadi_ws.solvers.sensitivity.sensitivity`), spares an LU.
+    ``sens`` = (A, S) or (A, S, Q) at (q, u), if known (:func:`casadi_ws.solvers.sensitivity.sensitivity`,
+    :func:`~casadi_ws.solvers.sensitivity.curvature`), spares an LU; with Q the first equilibrium is
+    predicted to second order, which spares the second LU of its Newton solve.
     """
     settings = settings or BackwardSettings()
     if settings.formulation == "reduced":
@@ -110,8 +112,9 @@ def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardRe
         fac = tangent_factorization(model, q, u)
         n_fac += 1
     tip = model.tip(q)
+    Q = sens[2] if sens is not None and len(sens) > 2 else None
     for it in range(1, settings.max_iterations + 1):
-        A, S = sens if (it == 1 and sens is not None) else sensitivity(model, q, fac)
+        A, S = sens[:2] if (it == 1 and sens is not None) else sensitivity(model, q, fac)
         # bounded linear least squares for du: min |tip + A du - target|^2, u_min <= u + du <= u_max
         du = bounded_step(A, target - tip, model.u_min - u, model.u_max - u)
         miss = np.abs(tip + A @ du - target).max()
@@ -126,7 +129,7 @@ def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardRe
             return BackwardResult(q, u, tip, GAVE_UP, it - 1, n_eq, n_fac, fac)
         u_new = u + du
         guess = q.copy()
-        guess[model.free] += S @ du
+        guess[model.free] += S @ du + (second_order(Q, du) if (it == 1 and Q is not None) else 0.0)
         eq = solve_equilibrium(model, u_new, q0=q, u0=u, guess=guess)
         n_eq += 1
         n_fac += eq.factorizations

@@ -36,7 +36,7 @@ from ..fem.model import StaticModel
 from ..runtime.executor import Executor, deferred_interrupt, make_executor, one_blas_thread
 from ..runtime.run_state import RunState, fingerprint
 from ..solvers.equilibrium import CONVERGED, solve_equilibrium, tangent_factorization
-from ..solvers.sensitivity import bounded_step, closest_to_box, sensitivity
+from ..solvers.sensitivity import bounded_step, closest_to_box, curvature, sensitivity
 from ..status import Status
 from .backward import BackwardSettings, backward
 from .interval import Grid, interval_box, neighbourhood
@@ -93,6 +93,7 @@ class _Config:
     u: np.ndarray
     A: np.ndarray | None  # C K^-1 H^T at this configuration (Step 1)
     S: np.ndarray | None  # K^-1 H^T: the first Gauss-Newton step of its backward solves
+    Q: np.ndarray | None = None  # d2q/du2: that step's second-order predictor (reduced backward only)
 
 
 def algorithm1(ex: Exploration, executor: Executor, ctrl_c) -> None:
@@ -111,26 +112,33 @@ def algorithm1(ex: Exploration, executor: Executor, ctrl_c) -> None:
         ex.end_iteration()
 
 
-def _expand(model, q, u, A, S, targets, scale, bsettings):
+def _expand(model, q, u, A, S, Q, targets, scale, bsettings):
     """Step 3 for one configuration: backward solves of its targets; returns plain data per target.
 
-    The sensitivities of each new configuration come from the backward's last Newton LU (one iterate
-    from the answer: A is ~0.5 % off, far below what the box and the prefilter can notice). They travel
-    with the configuration, so expanding it needs no LU, in this process or in a worker, and the result
-    does not depend on the number of workers.
+    The sensitivities of each new configuration come from the backward's last Newton LU (at the
+    second-order predictor, one iterate from the answer: A is ~1 % off, far below what the box and the
+    prefilter can notice), and so does its curvature Q (reduced backward: the second-order predictor of
+    its own targets). They travel with the configuration, so expanding it needs no LU, in this process
+    or in a worker, and the result does not depend on the number of workers.
     """
     out = []
+    sens = (A, S) if Q is None else (A, S, Q)
     for target in targets:
-        res = backward(model, target, q, u, None, scale, bsettings, sens=(A, S))
-        A_new = S_new = None
+        res = backward(model, target, q, u, None, scale, bsettings, sens=sens)
+        A_new = S_new = Q_new = None
         n_fac = res.factorizations
         if res.ok:
             fac = res.fac
             if fac is None:
                 fac = tangent_factorization(model, res.q, res.u)
                 n_fac += 1
-            A_new, S_new = sensitivity(model, res.q, fac)
-        out.append((res.q, res.u, res.tip, res.status, res.ok, A_new, S_new, res.equilibrium_solves, n_fac))
+            # the LU is at the predictor, one iterate away: refine with the exact tangent at the answer
+            K = None if np.array_equal(fac.q, res.q) else model.residual_and_tangent(res.q, res.u)[1]
+            A_new, S_new = sensitivity(model, res.q, fac, K)
+            if bsettings.formulation == "reduced":
+                Q_new = curvature(model, res.q, res.u, S_new, fac, scale, K)
+        out.append((res.q, res.u, res.tip, res.status, res.ok, A_new, S_new, Q_new, res.equilibrium_solves,
+                    n_fac))
     return out
 
 
@@ -218,13 +226,13 @@ class Exploration:
     def backward(self, tasks, executor: Executor, ctrl_c) -> list:
         """Step 3: the backward solves of every task, warm-started from its configuration, in task order."""
         t = time.perf_counter()
-        jobs = [(cfg.q, cfg.u, cfg.A, cfg.S, [tg for _, tg in todo], self.eta(cfg), self.bsettings)
+        jobs = [(cfg.q, cfg.u, cfg.A, cfg.S, cfg.Q, [tg for _, tg in todo], self.eta(cfg), self.bsettings)
                 for cfg, todo in tasks]
         order = list(range(len(jobs)))
         if executor.workers > 1:
             # the configurations with the most targets first, so no worker is left with a long one at the
             # end of the iteration (the results are put back in order: same result as 1 worker)
-            order.sort(key=lambda i: -len(jobs[i][4]))
+            order.sort(key=lambda i: -len(jobs[i][5]))
         answers = [None] * len(jobs)
         for k, out in executor.map_unordered(_expand, self.problem, [jobs[i] for i in order]):
             answers[order[k]] = out
@@ -241,7 +249,7 @@ class Exploration:
         new_frontier = []
         for (cfg, todo), out in zip(tasks, answers):
             eta = self.eta(cfg)
-            for (cell, target), (q, u, tip, status, ok, A, S, n_eq, n_fac) in zip(todo, out):
+            for (cell, target), (q, u, tip, status, ok, A, S, Q, n_eq, n_fac) in zip(todo, out):
                 self.counters["backward_solves"] += 1
                 self.counters["equilibrium_solves"] += n_eq
                 self.counters["factorizations"] += n_fac
@@ -258,11 +266,11 @@ class Exploration:
                         self.counters["explored"] += 1
                     if not on_target:
                         self.counters["adopted"] += 1
-                    new = _Config(cell, tip, q, u, A, S)
+                    new = _Config(cell, tip, q, u, A, S, Q)
                     new_frontier.append(new)
                     self.reached.append(new)
                     self.reached_cells.add(cell)
-            cfg.S = None  # expanded: no longer needed
+            cfg.S = cfg.Q = None  # expanded: no longer needed
         return new_frontier
 
     def _fail(self, target, status: Status) -> None:
@@ -301,6 +309,9 @@ class Exploration:
                       failed_status=np.array(self.failed_status, dtype=int))
         if self.settings.store_states:
             arrays["q"] = np.array([c.q for c in reached])
+        if all(reached[i].Q is not None for i in fr):  # reduced backward
+            arrays["frontier_Q"] = np.array([reached[i].Q for i in fr], dtype=np.float32).reshape(
+                len(fr), m.n_u * (m.n_u + 1) // 2, m.n_free)
         self.run.save({"counters": self.counters, "timings": self.timings}, arrays)
 
     def restore(self, meta: dict, a: dict) -> None:
@@ -313,7 +324,8 @@ class Exploration:
             k = int(np.searchsorted(a["frontier"], i)) if f else -1
             self.reached.append(_Config(tuple(int(c) for c in a["cells"][i]), a["p"][i],
                                         a["frontier_q"][k] if f else (a["q"][i] if "q" in a else None), a["u"][i],
-                                        a["frontier_A"][k] if f else None, a["frontier_S"][k] if f else None))
+                                        a["frontier_A"][k] if f else None, a["frontier_S"][k] if f else None,
+                                        a["frontier_Q"][k] if f and "frontier_Q" in a else None))
         self.frontier = [self.reached[i] for i in sorted(fset)]
         self.reached_cells = {c.cell for c in self.reached}
         self.visited = {tuple(int(c) for c in v) for v in a["visited"]}
@@ -377,8 +389,11 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
             if eq.status != CONVERGED:
                 raise RuntimeError(f"no equilibrium at u = u_min ({eq.status_name}); cannot start")
             grid = Grid(eq.tip, settings.step) if settings.strategy == "uniform" else None
-            A0, S0 = sensitivity(model, eq.q, tangent_factorization(model, eq.q, eq.u))
-            start = _Config(grid.index(eq.tip) if grid else (0, 0, 0), eq.tip, eq.q, eq.u.copy(), A0, S0)
+            fac0 = tangent_factorization(model, eq.q, eq.u)
+            A0, S0 = sensitivity(model, eq.q, fac0)
+            reduced = settings.backward.formulation == "reduced"
+            Q0 = curvature(model, eq.q, eq.u, S0, fac0, settings.step) if reduced else None
+            start = _Config(grid.index(eq.tip) if grid else (0, 0, 0), eq.tip, eq.q, eq.u.copy(), A0, S0, Q0)
             ex = Exploration(problem, model, settings, run, start, grid)
             ex.counters["equilibrium_solves"] += 1
             ex.counters["factorizations"] += 1
