@@ -79,11 +79,33 @@ def test_curvature_is_the_second_derivative_of_the_equilibrium_path():
     # it gives the answer's own A (without, A is ~1 % off)
     du = np.array([6.0, 0.0])
     ex = solve_equilibrium(m, u + du, q0=eq.q, u0=u, tol=1e-11)
-    at_predictor = tangent_factorization(m, quad_predictor(m, eq.q, S, Q, du), u + du)
-    A_exact, _ = sensitivity(m, ex.q, tangent_factorization(m, ex.q, u + du))
+    guess = quad_predictor(m, eq.q, S, Q, du)
+    at_predictor = Factorization(factorize(m.residual_and_tangent(guess, u + du)[1]), guess)  # double precision
+    A_exact, _ = sensitivity(m, ex.q, Factorization(factorize(m.residual_and_tangent(ex.q, u + du)[1]), ex.q))
     A_near, _ = sensitivity(m, ex.q, at_predictor)
     A_refined, _ = sensitivity(m, ex.q, at_predictor, m.residual_and_tangent(ex.q, u + du)[1])
     assert np.abs(A_refined - A_exact).max() < 0.1 * np.abs(A_near - A_exact).max()
+
+
+def test_single_precision_lu_gives_double_precision_sensitivities_and_is_refused_when_inaccurate(rng):
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    u = np.array([30.0, 30.0])
+    eq = solve_equilibrium(m, u)
+    _, K, _ = m.residual_and_tangent(eq.q, u)
+    single, double = Factorization(factorize(K, single=True), eq.q), Factorization(factorize(K), eq.q)
+    assert single.K is not None and double.K is None  # Newton's LUs are single, factorize's default double
+    A1, _ = sensitivity(m, eq.q, single)
+    A2, _ = sensitivity(m, eq.q, double)
+    np.testing.assert_allclose(A1, A2, rtol=1e-4, atol=1e-4 * np.abs(A2).max())
+    # cond ~1e10: single precision would be meaningless, the probe falls back to double
+    U, _ = np.linalg.qr(rng.standard_normal((40, 40)))
+    V, _ = np.linalg.qr(rng.standard_normal((40, 40)))
+    bad = sp.csc_matrix(U @ np.diag(np.logspace(0, 10, 40)) @ V.T)
+    lu = factorize(bad, single=True)
+    assert not lu.single and lu.K is None
+    x = rng.standard_normal(40)
+    np.testing.assert_allclose(lu.solve(bad @ x), x, rtol=1e-4)
 
 
 def quad_predictor(m, q, S, Q, du):
