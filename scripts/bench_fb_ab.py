@@ -1,0 +1,100 @@
+"""Forward-backward time of this tree against an earlier revision, interleaved on the same machine.
+
+    python scripts/bench_fb_ab.py [--base 03d6aab] [--problems 2 3 4] [--repeats 1]
+
+The issue that set "no slower than 15 / 37 / 82 s" measured those times on another day; this machine's
+speed varies by up to ~30 % between runs. So both codes run here, one after the other per problem (base,
+this tree, base, ...), 2 workers, default settings, and the section records both. The base revision is
+checked out into a temporary git worktree and imported from there (same virtual environment).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from benchlib import machine, write_section
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# run in a subprocess, with the tree to measure first on sys.path (worker processes inherit it)
+RUNNER = r"""
+import json, sys, time
+tree, problem = sys.argv[1], sys.argv[2]
+sys.path.insert(0, tree)
+import casadi_ws as cw
+try:
+    from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
+except ImportError:  # before the sub-packages
+    from casadi_ws.forward_backward import FBSettings, forward_backward
+assert cw.__file__.startswith(tree), cw.__file__
+pb = cw.load_problem(problem)
+t = time.perf_counter()
+r = forward_backward(pb, FBSettings(workers=2, progress=False))
+c = r.counters
+print(json.dumps({"time": time.perf_counter() - t, "cells": c["feasible"], "lu": c["factorizations"]}))
+"""
+
+
+def run(tree: Path, problem: Path) -> dict:
+    out = subprocess.run([sys.executable, "-c", RUNNER, str(tree), str(problem)], capture_output=True, text=True,
+                         check=True, cwd=tree)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--base", default="03d6aab", help="git revision to compare with (default: the code of "
+                    "the day the FB-completeness issue was filed)")
+    ap.add_argument("--problems", type=int, nargs="+", default=[2, 3, 4])
+    ap.add_argument("--repeats", type=int, default=1)
+    ap.add_argument("--section", default="fb-ab")
+    args = ap.parse_args()
+    base_rev = subprocess.run(["git", "rev-parse", "--short", args.base], cwd=ROOT, capture_output=True, text=True,
+                              check=True).stdout.strip()
+    head_rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
+                              check=True).stdout.strip()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        base = Path(tmp) / "base"
+        subprocess.run(["git", "worktree", "add", "--detach", "-f", str(base), args.base], cwd=ROOT, check=True,
+                       capture_output=True)
+        try:
+            for n in args.problems:
+                problem = ROOT / "problems" / f"trunk_{n}cables.yaml"
+                old, new = [], []
+                for _ in range(args.repeats):
+                    old.append(run(base, problem))
+                    new.append(run(ROOT, problem))
+                    print(n, old[-1], new[-1], flush=True)
+                rows.append((n, old, new))
+        finally:
+            subprocess.run(["git", "worktree", "remove", "--force", str(base)], cwd=ROOT, capture_output=True)
+
+    def cell(rs):
+        t = sum(r["time"] for r in rs) / len(rs)
+        return f"{t:.1f} s, {rs[0]['cells']} cells, {rs[0]['lu'] / rs[0]['cells']:.2f} LU / cell"
+
+    lines = [
+        f"## Forward-backward, this code against `{base_rev}` (issue: FB that misses nothing) — "
+        f"`scripts/bench_fb_ab.py --base {args.base}`",
+        "",
+        f"Machine: {machine()}. Problems `problems/trunk_{{2,3,4}}cables.yaml`, 4 mm grid, 2 worker processes, "
+        f"default settings. Runs interleaved (base, this code) per problem, {args.repeats} of each; times are "
+        f"means. This code: `{head_rev}`.",
+        "",
+        f"| n_u | `{base_rev}` | this code | time ratio |",
+        "|---|---|---|---|",
+    ]
+    for n, old, new in rows:
+        ratio = sum(r["time"] for r in new) / sum(r["time"] for r in old)
+        lines.append(f"| {n} | {cell(old)} | {cell(new)} | {ratio:.2f} |")
+    write_section(args.section, "\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
