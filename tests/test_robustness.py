@@ -124,7 +124,7 @@ def _kill_when_checkpointed(cmd, out: Path, sig=signal.SIGKILL, timeout=120):
     return proc.returncode, err
 
 
-@pytest.mark.parametrize("method,args", [("forward", ["--nd", "14", "--checkpoint-every", "0.3"]),
+@pytest.mark.parametrize("method,args", [("forward", ["--nd", "24", "--checkpoint-every", "0.3"]),
                                          ("fb", ["--step", "0.006"])])
 def test_killed_run_resumes_to_the_same_result(tmp_path, method, args):
     prob = _coarse_problem(tmp_path)
@@ -187,10 +187,10 @@ def test_fb_budget_stops_cleanly_and_resumes_with_a_larger_one(tmp_path):
 def test_ctrl_c_stops_cleanly_with_a_resumable_checkpoint(tmp_path):
     prob = _coarse_problem(tmp_path)
     out = tmp_path / "run"
-    cmd = _cli("solve", prob, "--nd", "14", "--checkpoint-every", "0.3", "--quiet", "--out", out)
+    cmd = _cli("solve", prob, "--nd", "24", "--checkpoint-every", "0.3", "--quiet", "--out", out)
     code, err = _kill_when_checkpointed(cmd, out, sig=signal.SIGINT)
     assert code == 130 and "--resume" in err and "Traceback" not in err, err[-3000:]
-    r = subprocess.run(_cli("solve", prob, "--nd", "14", "--quiet", "--out", out, "--resume"),
+    r = subprocess.run(_cli("solve", prob, "--nd", "24", "--quiet", "--out", out, "--resume"),
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    assert json.loads((out / "summary.json").read_text())["n_points"] == 14 * 14
+    assert json.loads((out / "summary.json").read_text())["n_points"] == 24 * 24
