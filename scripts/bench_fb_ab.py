@@ -27,11 +27,12 @@ import json, sys, time
 tree, problem = sys.argv[1], sys.argv[2]
 sys.path.insert(0, tree)
 import casadi_ws as cw
-try:
-    from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
-except ImportError:  # before the sub-packages
+try:  # the layout before the sub-packages first: the editable install's finder would resolve a missing
+    # sub-package of an old tree to this one
     from casadi_ws.forward_backward import FBSettings, forward_backward
-assert cw.__file__.startswith(tree), cw.__file__
+except ImportError:
+    from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
+assert cw.__file__.startswith(tree) and forward_backward.__code__.co_filename.startswith(tree)
 pb = cw.load_problem(problem)
 t = time.perf_counter()
 r = forward_backward(pb, FBSettings(workers=2, progress=False))
@@ -42,7 +43,9 @@ print(json.dumps({"time": time.perf_counter() - t, "cells": c["feasible"], "lu":
 
 def run(tree: Path, problem: Path) -> dict:
     out = subprocess.run([sys.executable, "-c", RUNNER, str(tree), str(problem)], capture_output=True, text=True,
-                         check=True, cwd=tree)
+                         cwd=tree)
+    if out.returncode != 0:
+        raise SystemExit(f"{tree}: {problem.name} failed:\n{out.stderr[-3000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
