@@ -191,12 +191,12 @@ def cmd_solve(args) -> int:
     from .io.output import write_outputs
     from .workspace.measures import measures
 
-    result.measures = measures(result, step=args.step, task=task)
     try:
+        result.measures = measures(result, step=args.step, task=task)
         write_outputs(result, problem, out, args.quiet)
-    except KeyboardInterrupt:  # the run is complete and its checkpoint gone: only the files can be missing
+    except KeyboardInterrupt:  # after the run: its result files may be incomplete
         print(f"casadi-ws: interrupted while writing the results into {out}; some files may be missing: run the "
-              f"same command with --overwrite", file=sys.stderr)
+              f"same command with --overwrite to compute them again", file=sys.stderr)
         return 130
     return 0
 

@@ -106,6 +106,11 @@ def test_single_precision_lu_gives_double_precision_sensitivities_and_is_refused
     assert not lu.single and lu.K is None
     x = rng.standard_normal(40)
     np.testing.assert_allclose(lu.solve(bad @ x), x, rtol=1e-4)
+    # exactly singular once rounded to single precision: factorised in double
+    nearly = sp.csc_matrix(np.array([[1.0, 1.0], [1.0, 1.0 + 1e-10]]))
+    lu = factorize(nearly, single=True)
+    assert not lu.single
+    np.testing.assert_allclose(nearly @ lu.solve(np.array([1.0, 2.0])), [1.0, 2.0], rtol=1e-5)
 
 
 def quad_predictor(m, q, S, Q, du):

@@ -7,8 +7,9 @@ Two backends give the same numbers:
             numpy's memory directly (ctypes, no copies). The shared library is cached on disk under a hash
             of the generated code and of the CPU, so it is compiled once per machine and reused by every
             run and process. It is built for this CPU's instruction set (``-march=native``: the
-            corotational stiffness runs ~1.8x faster with its vector and fused multiply-add
-            instructions), so a cache shared between machines keeps one library per kind of CPU.
+            corotational stiffness runs ~1.8x faster with its vector instructions; no fused multiply-adds,
+            so the numbers do not depend on the CPU), and a cache shared between machines keeps one
+            library per kind of CPU.
 ``casadi``  ``Function.map`` evaluated by CasADi's virtual machine, with numpy <-> DM conversions. No
             compiler needed; ~10x slower on the stiffness, mostly in the conversions.
 
@@ -78,14 +79,15 @@ def have_compiler() -> bool:
 
 
 @functools.cache
-def _cpu() -> str:
-    """What ``-march=native`` compiles for: the CPU's model and instruction-set flags."""
+def _cpu() -> str | None:
+    """What ``-march=native`` compiles for: the CPU's model and instruction-set flags; None where they
+    cannot be read (then the build is generic, so a shared cache never hands a CPU foreign instructions)."""
     try:
         with open("/proc/cpuinfo") as f:
             lines = [ln for ln in f if ln.startswith(("model name", "flags", "Features", "CPU part"))]
-        return platform.machine() + "".join(dict.fromkeys(lines))
     except OSError:
-        return platform.machine() + platform.processor()
+        return None
+    return platform.machine() + "".join(dict.fromkeys(lines)) if lines else None
 
 
 def _build(fun: ca.Function) -> Path | None:
@@ -98,7 +100,7 @@ def _build(fun: ca.Function) -> Path | None:
         cg.add(fun)
         code = Path(cg.generate(tmp + os.sep)).read_text()
     code += _DRIVER.format(name=name)
-    key = hashlib.sha256((code + ca.__version__ + _cpu()).encode()).hexdigest()[:16]
+    key = hashlib.sha256((code + ca.__version__ + (_cpu() or "generic")).encode()).hexdigest()[:16]
     lib = cache_dir() / f"{name}_{key}.so"
     if lib.exists():
         return lib
@@ -111,7 +113,10 @@ def _build(fun: ca.Function) -> Path | None:
         # gcc's -O2 time grows faster than linearly with one huge straight-line function: the stiffness of
         # a corotational 10-node element (2.5 MB of C) took ~4 min at -O2 and 7 s at -O1
         opt = "-O2" if len(code) < 500_000 else "-O1"
-        for arch in (["-march=native"], []):  # a compiler that does not know -march=native: the generic build
+        # -ffp-contract=off: no fused multiply-adds, so a kernel rounds the same on every x86-64 CPU (a task
+        # re-run on another machine of a cluster, a checkpoint resumed elsewhere give the same numbers)
+        native = [["-march=native", "-ffp-contract=off"]] if _cpu() is not None else []
+        for arch in (*native, []):  # a compiler that does not know -march=native: the generic build
             res = subprocess.run([cc, opt, *arch, "-fPIC", "-shared", str(src), "-o", str(part), "-lm"],
                                  capture_output=True, text=True)
             if res.returncode == 0:

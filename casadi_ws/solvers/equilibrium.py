@@ -121,10 +121,14 @@ def factorize(K, single: bool = False) -> object:
         del _ORDERINGS[4:]  # a few models per process (a design study's worker builds many)
     Kp = o.permute(K)
     if single:
-        lu = sla.splu(Kp.astype(np.float32), permc_spec="NATURAL", **opts)
-        x = lu.solve((Kp @ o.probe).astype(np.float32))
-        if np.linalg.norm(x - o.probe) < SINGLE_PRECISION_PROBE * np.linalg.norm(o.probe):
-            return _PermutedLU(lu, o.p, K)
+        try:
+            lu = sla.splu(Kp.astype(np.float32), permc_spec="NATURAL", **opts)
+        except RuntimeError:  # singular in single precision: double may still factorise it
+            lu = None
+        if lu is not None:
+            x = lu.solve((Kp @ o.probe).astype(np.float32))
+            if np.linalg.norm(x - o.probe) < SINGLE_PRECISION_PROBE * np.linalg.norm(o.probe):
+                return _PermutedLU(lu, o.p, K)
     return _PermutedLU(sla.splu(Kp, permc_spec="NATURAL", **opts), o.p)
 
 

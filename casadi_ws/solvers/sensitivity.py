@@ -11,8 +11,8 @@ __all__ = ["bounded_step", "closest_to_box", "curvature", "second_order", "sensi
 def sensitivity(model, q, fac, K=None) -> tuple[np.ndarray, np.ndarray]:
     """(A, S): A = C K^-1 H^T (3 x n_u), S = K^-1 H^T = dq/du on the free dofs (n_free x n_u).
 
-    ``K``: the tangent at q, when ``fac`` was computed near q but not at it: one step of iterative
-    refinement then brings S to K's own (an LU one Newton iterate away leaves A ~1 % off; the predictors
+    ``K``: the tangent at q, when ``fac`` was computed near q but not at it: iterative refinement (one
+    step, two after a single-precision LU) then brings S to K's own (an LU one Newton iterate away leaves A ~1 % off; the predictors
     built on S need it closer, see :func:`curvature`). Without it, a single-precision ``fac`` is refined
     against its own matrix (its round-off leaves A 0.4-2 % off on the trunk; after two steps, ~1e-6).
     """
@@ -41,8 +41,11 @@ def curvature(model, q, u, S, fac, tip_step: float, K=None) -> np.ndarray:
     suffices (docs/methods.md). Differentiating R(q(u), u) = 0 twice: K Q(d, d) = -D2R[(S d, d)]^2, the
     second directional derivative along the path's tangent, taken by central differences
     R(q + S d, u + d) + R(q - S d, u - d) (odd orders cancel; one-sided ones were useless), with input
-    increments that move the tip by a tenth of ``tip_step`` (the grid step; 0.01-0.25 of it measured the
-    same); pairs by polarisation. n_u(n_u+1) residuals and one solve. float32: a predictor needs no
+    increments that move the tip by a tenth of ``tip_step`` (the step of the grid the predictor serves;
+    0.01-0.25 of it measured the same); pairs by polarisation. (The -2 R(q, u) of the second difference is
+    left out: at a verified equilibrium it is below the tolerance, ~1e-6 of the term.) n_u(n_u+1)
+    residuals and one solve (two with ``K``); a non-finite Q (degenerate increments) is returned as
+    zeros, i.e. the linear predictor. float32: a predictor needs no
     more, and it halves what travels between processes and what a checkpoint holds. ``K`` as in
     :func:`sensitivity`: without that refinement the errors of Q and of the LU at its predictor feed each
     other from one configuration to the next.
@@ -50,8 +53,11 @@ def curvature(model, q, u, S, fac, tip_step: float, K=None) -> np.ndarray:
     K = K if K is not None else getattr(fac, "K", None)
     n = S.shape[1]
     reach = np.linalg.norm(model.C_free @ S, axis=0)  # tip movement per unit input
-    h = np.where(reach > 0, 0.1 * tip_step / np.where(reach > 0, reach, 1.0),
-                 1e-3 * np.maximum(model.u_max - model.u_min, 1.0))
+    span = model.u_max - model.u_min
+    span = np.where(np.isfinite(span) & (span > 0), span, 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h = np.minimum(0.1 * tip_step / reach, 0.1 * span)
+    h = np.where(np.isfinite(h) & (h > 0), h, 1e-3 * span)
 
     def second_difference(d):
         dq = S @ d
@@ -76,6 +82,8 @@ def curvature(model, q, u, S, fac, tip_step: float, K=None) -> np.ndarray:
     Q = -fac.solve(B)
     if K is not None:
         Q = Q - fac.solve(B + K @ Q)
+    if not np.all(np.isfinite(Q)):
+        Q = np.zeros_like(Q)
     return np.ascontiguousarray(Q.T, dtype=np.float32)
 
 

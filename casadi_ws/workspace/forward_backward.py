@@ -116,10 +116,11 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings):
     """Step 3 for one configuration: backward solves of its targets; returns plain data per target.
 
     The sensitivities of each new configuration come from the backward's last Newton LU (at the
-    second-order predictor, one iterate from the answer: A is ~1 % off, far below what the box and the
-    prefilter can notice), and so does its curvature Q (reduced backward: the second-order predictor of
-    its own targets). They travel with the configuration, so expanding it needs no LU, in this process
-    or in a worker, and the result does not depend on the number of workers.
+    second-order predictor, one iterate from the answer), refined with the exact tangent at the answer
+    (A ~1 % off without, which the box would not notice but the next predictor would), and so does its
+    curvature Q (reduced backward: the second-order predictor of its own targets). They travel with the
+    configuration, so expanding it needs no LU, in this process or in a worker, and the result does not
+    depend on the number of workers.
     """
     out = []
     sens = (A, S) if Q is None else (A, S, Q)
@@ -133,9 +134,11 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings):
                 fac = tangent_factorization(model, res.q, res.u)
                 n_fac += 1
             # the LU is at the predictor, one iterate away: refine with the exact tangent at the answer
-            K = None if np.array_equal(fac.q, res.q) else model.residual_and_tangent(res.q, res.u)[1]
+            reduced = bsettings.formulation == "reduced"  # (IPOPT's backward has no predictor to feed)
+            at_answer = np.array_equal(fac.q, res.q)
+            K = None if (at_answer or not reduced) else model.residual_and_tangent(res.q, res.u)[1]
             A_new, S_new = sensitivity(model, res.q, fac, K)
-            if bsettings.formulation == "reduced":
+            if reduced:
                 Q_new = curvature(model, res.q, res.u, S_new, fac, scale, K)
         out.append((res.q, res.u, res.tip, res.status, res.ok, A_new, S_new, Q_new, res.equilibrium_solves,
                     n_fac))
@@ -377,8 +380,10 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
         model = model or StaticModel(problem)
         build_model = time.perf_counter() - t0
         # the budget is not part of the answer: a run stopped by it resumes with a larger one
-        fp = fingerprint("forward-backward", model,
-                         asdict(settings) | {"workers": None, "progress": None, "max_cells": None})
+        # checkpoint format 2: frontiers carry Q; a format-1 checkpoint would resume without it and so end
+        # with another result than an uninterrupted run
+        fp = fingerprint("forward-backward", model, asdict(settings) | {"workers": None, "progress": None,
+                                                                         "max_cells": None, "format": 2})
         run = RunState(checkpoint_dir, "forward-backward", fp, resume, t0)
 
         own = executor is None
