@@ -100,9 +100,10 @@ def factorize(K, single: bool = False) -> object:
     Why single: the factorisation is most of an equilibrium's cost, and in float32 it takes ~26 % less
     time on the trunk (~30 % on the 10-node trunk and the PneuNets finger). Newton loses nothing: its
     chord steps contract by the LU's relative error, measured at 0.002-0.1 (spectral radius of
-    I - LU^-1 K; the probe's error is about half of it) on every shipped problem, and the residual it is verified on is computed in double
-    precision. Sensitivities refine their solves against K (:class:`Factorization`). A probe solve with
-    a fixed vector falls back to double precision when the error is above ``SINGLE_PRECISION_PROBE``.
+    I - LU^-1 K; the probe's error is about half of it) on every shipped problem, and the residual it is
+    verified on is computed in double precision. Sensitivities refine their solves against K
+    (:class:`Factorization`). A probe solve with a fixed vector falls back to double precision when its
+    error is above ``SINGLE_PRECISION_PROBE``, and so does a matrix singular in single precision.
     """
     # K is structurally symmetric and nearly numerically symmetric: symmetric mode with a small pivot
     # threshold keeps the fill-reducing ordering of A + A^T (measured ~10 % faster than COLAMD here).

@@ -11,24 +11,32 @@ __all__ = ["bounded_step", "closest_to_box", "curvature", "second_order", "sensi
 def sensitivity(model, q, fac, K=None) -> tuple[np.ndarray, np.ndarray]:
     """(A, S): A = C K^-1 H^T (3 x n_u), S = K^-1 H^T = dq/du on the free dofs (n_free x n_u).
 
-    ``K``: the tangent at q, when ``fac`` was computed near q but not at it: iterative refinement (one
-    step, two after a single-precision LU) then brings S to K's own (an LU one Newton iterate away leaves A ~1 % off; the predictors
-    built on S need it closer, see :func:`curvature`). Without it, a single-precision ``fac`` is refined
-    against its own matrix (its round-off leaves A 0.4-2 % off on the trunk; after two steps, ~1e-6).
+    ``K``: the tangent at q, when ``fac`` was computed near q but not at it: iterative refinement then
+    brings S to K's own (an LU one Newton iterate away leaves A ~1 % off; the predictors built on S need
+    it closer, see :func:`curvature`). Without it, a single-precision ``fac`` is refined against its own
+    matrix (its round-off leaves A 0.4-2 % off on the trunk; after two steps, ~1e-6).
     """
-    K = K if K is not None else getattr(fac, "K", None)
     H = model.actuation_matrix(q)  # (n_u, n_free), H = -dL/dq
     if not model.n_u:
         return np.zeros((3, 0)), np.zeros((model.n_free, 0))
     HT = np.ascontiguousarray(H.T)
     # one solve with n_u right-hand sides reads the factors once (they do not fit in cache)
     S = fac.solve(HT)
-    # two steps after a single-precision LU (its error contracts by ~0.01-0.1 per step), one otherwise
-    for _ in range(0 if K is None else 2 if getattr(fac, "K", None) is not None else 1):
+    K, steps = _refinement(fac, K)
+    for _ in range(steps):
         S = S + fac.solve(HT - K @ S)
     # (C order, as a checkpoint restores it: the products with S then round the same way after a resume)
     S = np.ascontiguousarray(S)
     return model.C_free @ S, S
+
+
+def _refinement(fac, K):
+    """(matrix, steps) of the iterative refinement of solves with ``fac``: against ``K`` if given, else
+    against the matrix a single-precision LU keeps; two steps after a single-precision LU (its error
+    contracts by ~0.01-0.1 per step), one otherwise, none without a matrix."""
+    kept = getattr(fac, "K", None)
+    K = K if K is not None else kept
+    return K, 0 if K is None else (2 if kept is not None else 1)
 
 
 def curvature(model, q, u, S, fac, tip_step: float, K=None) -> np.ndarray:
@@ -44,13 +52,13 @@ def curvature(model, q, u, S, fac, tip_step: float, K=None) -> np.ndarray:
     increments that move the tip by a tenth of ``tip_step`` (the step of the grid the predictor serves;
     0.01-0.25 of it measured the same); pairs by polarisation. (The -2 R(q, u) of the second difference is
     left out: at a verified equilibrium it is below the tolerance, ~1e-6 of the term.) n_u(n_u+1)
-    residuals and one solve (two with ``K``); a non-finite Q (degenerate increments) is returned as
-    zeros, i.e. the linear predictor. float32: a predictor needs no
-    more, and it halves what travels between processes and what a checkpoint holds. ``K`` as in
-    :func:`sensitivity`: without that refinement the errors of Q and of the LU at its predictor feed each
-    other from one configuration to the next.
+    residuals and one solve, plus one refinement step against ``K`` (as in :func:`sensitivity`; without
+    it the errors of Q and of the LU at its predictor feed each other from one configuration to the
+    next). A non-finite Q (degenerate increments) is returned as zeros, i.e. the linear predictor.
+    float32: a predictor needs no more, and it halves what travels between processes and what a
+    checkpoint holds.
     """
-    K = K if K is not None else getattr(fac, "K", None)
+    K, _ = _refinement(fac, K)
     n = S.shape[1]
     reach = np.linalg.norm(model.C_free @ S, axis=0)  # tip movement per unit input
     span = model.u_max - model.u_min

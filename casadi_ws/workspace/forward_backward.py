@@ -133,16 +133,20 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings):
             if fac is None:
                 fac = tangent_factorization(model, res.q, res.u)
                 n_fac += 1
-            # the LU is at the predictor, one iterate away: refine with the exact tangent at the answer
-            reduced = bsettings.formulation == "reduced"  # (IPOPT's backward has no predictor to feed)
-            at_answer = np.array_equal(fac.q, res.q)
-            K = None if (at_answer or not reduced) else model.residual_and_tangent(res.q, res.u)[1]
-            A_new, S_new = sensitivity(model, res.q, fac, K)
-            if reduced:
-                Q_new = curvature(model, res.q, res.u, S_new, fac, scale, K)
+            A_new, S_new, Q_new = _derivatives(model, res.q, res.u, fac, scale, bsettings.formulation)
         out.append((res.q, res.u, res.tip, res.status, res.ok, A_new, S_new, Q_new, res.equilibrium_solves,
                     n_fac))
     return out
+
+
+def _derivatives(model, q, u, fac, eta, formulation):
+    """(A, S, Q) of a reached configuration from an LU near it; Q (and the refinement by the exact tangent
+    at q, when the LU was computed elsewhere: at the predictor, one iterate away) only for the reduced
+    backward, whose predictor they feed (IPOPT's has none)."""
+    reduced = formulation == "reduced"
+    K = None if (np.array_equal(fac.q, q) or not reduced) else model.residual_and_tangent(q, u)[1]
+    A, S = sensitivity(model, q, fac, K)
+    return A, S, (curvature(model, q, u, S, fac, eta, K) if reduced else None)
 
 
 class Exploration:
@@ -394,10 +398,8 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
             if eq.status != CONVERGED:
                 raise RuntimeError(f"no equilibrium at u = u_min ({eq.status_name}); cannot start")
             grid = Grid(eq.tip, settings.step) if settings.strategy == "uniform" else None
-            fac0 = tangent_factorization(model, eq.q, eq.u)
-            A0, S0 = sensitivity(model, eq.q, fac0)
-            reduced = settings.backward.formulation == "reduced"
-            Q0 = curvature(model, eq.q, eq.u, S0, fac0, settings.step) if reduced else None
+            A0, S0, Q0 = _derivatives(model, eq.q, eq.u, tangent_factorization(model, eq.q, eq.u), settings.step,
+                                      settings.backward.formulation)
             start = _Config(grid.index(eq.tip) if grid else (0, 0, 0), eq.tip, eq.q, eq.u.copy(), A0, S0, Q0)
             ex = Exploration(problem, model, settings, run, start, grid)
             ex.counters["equilibrium_solves"] += 1
