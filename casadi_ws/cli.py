@@ -44,21 +44,23 @@ def _u_unit(problem) -> str:
 
 
 def cmd_equilibrium(args) -> int:
-    from .solvers.equilibrium import solve_equilibrium
     from .fem.model import StaticModel
+    from .solvers.admissible import admissible_equilibrium
 
     problem = _load(args.problem)
     u = _parse_u(args.u, problem.n_u)
     model = StaticModel(problem)
-    eq = solve_equilibrium(model, u)
+    eq, adm, branched = admissible_equilibrium(model, u)
     states = model.actuator_states(eq.q)
     actuators = [{"name": a.name, "kind": a.kind, "u": float(v), "u_unit": a.input_unit,
                   a.quantity_name: float(st), f"{a.quantity_name}_unit": a.quantity_unit}
                  for a, v, st in zip(problem.actuators, u, states)]
     units = {"tip": "m", "u": _u_unit(problem)}
-    out = {"problem": problem.name, **eq.to_dict(), "actuators": actuators, "units": units}
+    checks = adm.to_dict() if adm is not None else {"admissible": False, "stable": None, "violations": []}
+    out = {"problem": problem.name, **eq.to_dict(), **checks, "stable_branch": branched, "actuators": actuators,
+           "units": units}
     print(json.dumps(out, indent=None if args.compact else 2))
-    return 0 if eq.converged else 1
+    return 0 if eq.converged and checks["admissible"] else 1
 
 
 def _prepare_out(path: str, overwrite: bool, resume: bool = False) -> tuple[Path, str]:

@@ -19,10 +19,13 @@ code  name                  meaning
 8     not_reached           forward-backward: the verified answer lies outside the target's cell
 9     prefiltered           forward-backward: not solved, the linearised closest point lies outside
                             the target's cell (see ``FBSettings.prefilter``)
+10    inadmissible          a converged equilibrium that fails an admissibility check (unstable,
+                            inverted, self-penetrating, beyond a state limit:
+                            :mod:`casadi_ws.solvers.admissible`): counted and kept apart
 ====  ====================  ========================================================================
 
-Codes 0-4 are an equilibrium's; 5-7 a backward or reach solve's; 8-9 a forward-backward target's. A point
-is reported only with code 0.
+Codes 0-4 are an equilibrium's; 5-7 a backward or reach solve's; 8-9 a forward-backward target's; 10 any
+method's. A point is reported only with code 0 and when admissible (or, with ``keep_inadmissible``, marked).
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ class Status(IntEnum):
     GAVE_UP = 7
     NOT_REACHED = 8
     PREFILTERED = 9
+    INADMISSIBLE = 10
 
     @property
     def label(self) -> str:

@@ -51,6 +51,11 @@ class Actuator:
         :meth:`rest_points`."""
         raise NotImplementedError
 
+    def quantity_limits(self, rest: float) -> tuple[float, float, str]:
+        """Bounds on Q that a state must keep (a cable's stroke, a chamber's volume), given Q at rest, and
+        the name of the violation (:mod:`casadi_ws.solvers.admissible`); none by default."""
+        return -np.inf, np.inf, ""
+
     def describe(self) -> dict:
         """Plain data that determines the actuator (for result files and checkpoint fingerprints)."""
         return {"kind": self.kind, "name": self.name, "u_min": float(self.u_min), "u_max": float(self.u_max),

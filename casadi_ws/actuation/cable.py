@@ -29,6 +29,8 @@ class Cable(Actuator):
     u_max: float = 100.0
     """Upper bound of the tension, N."""
     name: str = "cable"
+    stroke_max: float | None = None
+    """Largest shortening of the cable from its rest length (the motor's stroke), m; None: unlimited."""
 
     kind = "cable"
     input_unit = "N"
@@ -54,8 +56,11 @@ class Cable(Actuator):
             L += ca.norm_2(b - a)
         return L
 
+    def quantity_limits(self, rest: float) -> tuple[float, float, str]:
+        return (-np.inf if self.stroke_max is None else rest - self.stroke_max), np.inf, "stroke"
+
     def describe(self) -> dict:
-        return {**super().describe(),
+        return {**super().describe(), "stroke_max": self.stroke_max,
                 "pull_point": None if self.pull_point is None else np.asarray(self.pull_point, float).tolist()}
 
 

@@ -86,6 +86,8 @@ class Cavity(Actuator):
     u_max: float = 1e4
     """Upper bound of the pressure, Pa."""
     name: str = "cavity"
+    volume_max: float | None = None
+    """Largest volume of the chamber (m^3) before it bursts; None: unlimited."""
 
     kind = "cavity"
     input_unit = "Pa"
@@ -103,5 +105,8 @@ class Cavity(Actuator):
     def rest_volume(self) -> float:
         return float(surface_volume(self.rest_points(), self.triangles))
 
+    def quantity_limits(self, rest: float) -> tuple[float, float, str]:
+        return -np.inf, (np.inf if self.volume_max is None else self.volume_max), "volume"
+
     def describe(self) -> dict:
-        return {**super().describe(), "triangles": np.asarray(self.triangles).tolist()}
+        return {**super().describe(), "volume_max": self.volume_max, "triangles": np.asarray(self.triangles).tolist()}

@@ -51,6 +51,8 @@ class Material:
     """Poisson ratio nu, in (-1, 0.5)."""
     density: float = 1000.0
     """Mass density in kg/m^3 (used for gravity only)."""
+    max_stretch: float | None = None
+    """Largest principal stretch the material takes before it tears (an admissibility limit); None: none."""
 
     @property
     def lame(self) -> tuple[float, float]:

@@ -23,7 +23,11 @@ from .kernels import ElementBatch
 from .materials import element_functions
 from .mesh import embed
 
-__all__ = ["StaticModel"]
+__all__ = ["ROUNDOFF", "StaticModel"]
+
+ROUNDOFF = 100 * np.finfo(float).eps
+"""Relative round-off allowed in the assembled internal forces: at rest (zero load) a residual below
+ROUNDOFF x the elements' force scale counts as zero (measured at rest: ~3 eps for every law and order)."""
 
 
 @dataclass
@@ -94,6 +98,19 @@ class StaticModel:
         self.sign = np.array([a.sign for a in self.actuators], dtype=float)
         self._build_actuators()
         self._build_pattern()
+        rest_Q = self.actuator_states(np.zeros(self.n_dof))
+        limits = [a.quantity_limits(Q0) for a, Q0 in zip(self.actuators, rest_Q)]
+        self.quantity_limits = (np.array([l[0] for l in limits]), np.array([l[1] for l in limits]),
+                                [l[2] if np.isfinite(l[0]) or np.isfinite(l[1]) else "" for l in limits])
+        """(lower, upper, violation name) of each actuator's quantity Q (a cable's stroke, a chamber's
+        volume); the name is empty where it is unlimited."""
+        if not any(self.quantity_limits[2]):
+            self.quantity_limits = (self.quantity_limits[0], self.quantity_limits[1], [])
+        stretch = np.full(mesh.n_tets, np.inf if mat.max_stretch is None else mat.max_stretch)
+        for tets, region in problem.regions:
+            stretch[tets] = np.inf if region.max_stretch is None else region.max_stretch
+        self.max_stretch = stretch
+        """Largest principal stretch allowed per element (inf: none)."""
 
         # --- end-effector: p_E = C q + p_E(0)
         ee = np.atleast_2d(np.asarray(problem.end_effector, dtype=float))
@@ -101,8 +118,17 @@ class StaticModel:
         self.p0 = self.C @ self.X
         self.C_free = self.C[:, self.free].tocsc()
 
-        # force scale under which a residual counts as zero (loads of exactly 0 give q = 0 exactly)
-        self.force_floor = 1e-12 * mat.young_modulus * mesh.characteristic_length() ** 2
+        # force scale under which a residual counts as zero. Loads of exactly 0 give q = 0, but the internal
+        # forces there are round-off, ~eps of the force each element exerts at unit strain (E V_e^(2/3),
+        # the polar decomposition's included); that round-off must pass the tolerance whatever the law
+        E_e = np.full(mesh.n_tets, mat.young_modulus)
+        for tets, region in problem.regions:
+            E_e[tets] = region.young_modulus
+        self.element_force_scale = float(np.linalg.norm(E_e * np.abs(w.sum(axis=1)) ** (2.0 / 3.0)))
+        """The norm over elements of the force each exerts at unit strain, E_e V_e^(2/3) (N)."""
+        self.force_floor = max(1e-12 * mat.young_modulus * mesh.characteristic_length() ** 2,
+                               ROUNDOFF * self.element_force_scale / problem.solver.tolerance)
+        self._G_qp = G  # (m, n_qp, n_nodes, 3): deformation gradients for the admissibility checks
 
     # ------------------------------------------------------------------ assembly
     def _build_actuators(self):
@@ -208,6 +234,11 @@ class StaticModel:
     def positions(self, q: np.ndarray) -> np.ndarray:
         """Current node positions (n, 3)."""
         return (self.X + q).reshape(-1, 3)
+
+    def deformation_gradients(self, q: np.ndarray) -> np.ndarray:
+        """F = I + du/dX at every quadrature point, (m, n_qp, 3, 3)."""
+        ue = q[self._edofs].reshape(self.mesh.n_tets, self.element.n_nodes, 3)
+        return np.eye(3) + np.einsum("mai,mkaj->mkij", ue, self._G_qp)
 
     def internal_force(self, q: np.ndarray) -> np.ndarray:
         """f_int(q) on all dofs (3n,)."""

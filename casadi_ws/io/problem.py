@@ -20,6 +20,7 @@ from ..actuation.base import Actuator
 from ..actuation.cable import Cable, trunk_cable
 from ..fem.materials import MATERIAL_MODELS, Material
 from ..fem.mesh import Mesh, MeshError, box_mesh, embed, load_mesh, quadratic, trunk_mesh
+from ..solvers.admissible import AdmissibilitySettings
 
 __all__ = [
     "Problem",
@@ -87,6 +88,8 @@ class Problem:
     partial_fixed: list[tuple[np.ndarray, tuple[int, ...]]] = field(default_factory=list)
     """Further supports holding only some components of some nodes: (node indices, components 0/1/2)
     pairs (SOFA's PartialFixedConstraint: symmetry planes, rollers)."""
+    admissibility: AdmissibilitySettings = field(default_factory=AdmissibilitySettings)
+    """Which admissibility checks run on every reported equilibrium, and their tolerances."""
 
     def fixed_dofs(self) -> np.ndarray:
         """Mask (n_nodes, 3) of the displacement components held at zero."""
@@ -137,14 +140,16 @@ def nodes_on_plane(mesh: Mesh, point, normal, tolerance: float = 1e-9) -> np.nda
 # ---------------------------------------------------------------------------------------------------------
 
 _TOP_KEYS = {"name", "description", "mesh", "material", "material_regions", "gravity", "fixed", "cables",
-             "cavities", "end_effector", "loads", "solver", "workspace", "task"}
+             "cavities", "end_effector", "loads", "solver", "workspace", "task", "admissibility"}
 _MESH_GEN = {"generate", "length", "radius_base", "radius_tip", "resolution", "size", "divisions", "origin",
              "order"}
 _MESH_FILE = {"file", "scale", "units", "order"}
-_MATERIAL = {"model", "young_modulus", "poisson_ratio", "density"}
-_REGION = {"box", "young_modulus", "poisson_ratio", "density"}
-_CABLE = {"name", "points", "pull_point", "trunk_routing", "u_min", "u_max"}
-_CAVITY = {"name", "surface", "enclosing", "u_min", "u_max", "scale"}
+_MATERIAL = {"model", "young_modulus", "poisson_ratio", "density", "max_stretch"}
+_REGION = {"box", "young_modulus", "poisson_ratio", "density", "max_stretch"}
+_CABLE = {"name", "points", "pull_point", "trunk_routing", "u_min", "u_max", "stroke_max"}
+_CAVITY = {"name", "surface", "enclosing", "u_min", "u_max", "scale", "volume_max", "volume_max_ratio"}
+_ADMISSIBILITY = {"stability", "inversion", "self_penetration", "min_det_F", "penetration_depth",
+                  "keep_inadmissible"}
 _COMPONENTS = {"x": 0, "y": 1, "z": 2}
 _ROUTING = {"angle_deg", "kind", "radius", "taper", "z_start", "z_end", "spacing"}
 _SOLVER = {"tolerance", "max_iterations", "max_load_steps", "newton"}
@@ -203,6 +208,16 @@ class _Reader:
         if hi is not None and (v >= hi if hi_open else v > hi):
             self.fail(path, f"must be {'<' if hi_open else '<='} {hi}, got {v!r}")
         return int(v) if integer else float(v)
+
+    def optional(self, d: dict, name: str, key: str, **limits):
+        """A number that may be absent (None then), validated like :meth:`number`."""
+        return self.number(d, name, key, **limits) if d.get(name) is not None else None
+
+    def flag(self, d: dict, name: str, key: str, default: bool) -> bool:
+        v = d.get(name, default)
+        if not isinstance(v, bool):
+            self.fail(f"{key}.{name}", f"expected true or false, got {v!r}")
+        return v
 
     def vector(self, v, path: str, n: int = 3) -> np.ndarray:
         if not isinstance(v, (list, tuple)) or len(v) != n:
@@ -397,6 +412,15 @@ def _read_cavities(r: _Reader, lst, mesh: Mesh, base: Path) -> list:
             raise
         except ValueError as exc:
             r.fail(f"{key}.surface" if "surface" in c else f"{key}.enclosing", str(exc))
+        if "volume_max" in c and "volume_max_ratio" in c:
+            r.fail(key, "give volume_max (m^3) or volume_max_ratio (of the rest volume), not both")
+        cav.volume_max = r.optional(c, "volume_max", key, lo=0.0, lo_open=True)
+        ratio = r.optional(c, "volume_max_ratio", key, lo=0.0, lo_open=True)
+        if ratio is not None:
+            cav.volume_max = ratio * cav.rest_volume()
+        if cav.volume_max is not None and cav.volume_max <= cav.rest_volume():
+            r.fail(f"{key}.volume_max" + ("_ratio" if ratio is not None else ""),
+                   f"the limit {cav.volume_max:.6g} m^3 is not above the rest volume {cav.rest_volume():.6g} m^3")
         out.append(cav)
     return out
 
@@ -438,6 +462,7 @@ def _read_cables(r: _Reader, lst, mesh: Mesh) -> list[Cable]:
             j = int(far[0])
             r.fail(f"{key}.points[{j}]", f"point {np.round(cable.points[j], 6).tolist()} lies "
                    f"{emb.outside[j]:.4g} m outside the mesh (allowed: {MAX_OUTSIDE_RELATIVE * size:.3g} m)")
+        cable.stroke_max = r.optional(c, "stroke_max", key, lo=0.0, lo_open=True)
         cables.append(cable)
     return cables
 
@@ -470,8 +495,24 @@ def _read_regions(r: _Reader, lst, mesh: Mesh, material: Material) -> list:
                                        r.number(g, "young_modulus", key, material.young_modulus, lo=0.0, lo_open=True),
                                        r.number(g, "poisson_ratio", key, material.poisson_ratio, lo=-1.0, hi=0.5,
                                                 lo_open=True, hi_open=True),
-                                       r.number(g, "density", key, material.density, lo=0.0))))
+                                       r.number(g, "density", key, material.density, lo=0.0),
+                                       _max_stretch(r, g, key, material.max_stretch))))
     return regions
+
+
+def _max_stretch(r: _Reader, d: dict, key: str, default):
+    v = r.optional(d, "max_stretch", key, lo=1.0, lo_open=True)
+    return default if v is None else v
+
+
+def _read_admissibility(r: _Reader, value) -> AdmissibilitySettings:
+    a = r.mapping(value or {}, "admissibility", _ADMISSIBILITY)
+    return AdmissibilitySettings(
+        r.flag(a, "stability", "admissibility", True), r.flag(a, "inversion", "admissibility", True),
+        r.flag(a, "self_penetration", "admissibility", True),
+        r.number(a, "min_det_F", "admissibility", 0.1, lo=0.0, hi=1.0, hi_open=True),
+        r.number(a, "penetration_depth", "admissibility", 0.01, lo=0.0, hi=0.25, hi_open=True),
+        r.flag(a, "keep_inadmissible", "admissibility", False))
 
 
 def _read_task(r: _Reader, value, base: Path):
@@ -521,7 +562,8 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     material = Material(model,
                         r.number(m, "young_modulus", "material", lo=0.0, lo_open=True),
                         r.number(m, "poisson_ratio", "material", lo=-1.0, hi=0.5, lo_open=True, hi_open=True),
-                        r.number(m, "density", "material", 1000.0, lo=0.0))
+                        r.number(m, "density", "material", 1000.0, lo=0.0),
+                        _max_stretch(r, m, "material", None))
     regions = _read_regions(r, d.get("material_regions"), mesh, material)
     gravity = r.vector(d["gravity"], "gravity") if d.get("gravity") is not None else np.zeros(3)
     fixed, partial_fixed = _read_fixed(r, d["fixed"], mesh)
@@ -571,9 +613,10 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     if "workers" in w:
         workspace["workers"] = r.number(w, "workers", "workspace", lo=1, integer=True)
     task = _read_task(r, d.get("task"), base)
+    admissibility = _read_admissibility(r, d.get("admissibility"))
     name = str(d.get("name", Path(source).stem))
     return Problem(mesh, material, fixed, cables + cavities, end_effector, gravity, loads, solver, workspace, name,
-                   source, regions, task, partial_fixed)
+                   source, regions, task, partial_fixed, admissibility)
 
 
 def read_yaml(path: str | Path, what: str = "problem file", error=None):

@@ -36,8 +36,8 @@ def fingerprint(method: str, model, settings: dict) -> str:
     for a in (model.X, model.mesh.tets, model.free, model.F, model.u_min, model.u_max, model.p0, model._Pe):
         h.update(np.ascontiguousarray(a).tobytes())
     pb = model.problem
-    h.update(json.dumps([asdict(pb.material), asdict(pb.solver), [a.describe() for a in model.actuators]],
-                        default=float).encode())
+    h.update(json.dumps([asdict(pb.material), asdict(pb.solver), [a.describe() for a in model.actuators],
+                         asdict(pb.admissibility)], default=float).encode())
     h.update(json.dumps(settings, sort_keys=True, default=str).encode())
     return h.hexdigest()[:20]
 

@@ -37,6 +37,13 @@ class Factorization:
     def solve(self, b: np.ndarray) -> np.ndarray:
         return self.lu.solve(b)
 
+    def negative_pivots(self) -> int | None:
+        """How many pivots of the LU are negative, or None if SuperLU swapped rows (the count then says
+        nothing). Without row swaps the LU of a symmetric K is its L D L^T, so this is the number of K's
+        negative eigenvalues (Sylvester's law of inertia), at the price of reading U's diagonal."""
+        f = getattr(self.lu, "negative_pivots", None)
+        return f() if f is not None else None
+
     @property
     def K(self):
         """The matrix factorised when the LU is in single precision (:func:`factorize`), else None: what
@@ -79,6 +86,11 @@ class _PermutedLU:
         self.lu, self.p = lu, p
         self.single = K is not None  # factors in single precision, K kept to refine against
         self.K = K
+
+    def negative_pivots(self) -> int | None:
+        if not np.array_equal(self.lu.perm_r, np.arange(self.lu.shape[0])):
+            return None
+        return int(np.count_nonzero(self.lu.U.diagonal() < 0))
 
     def solve(self, b):
         x = np.empty(b.shape)

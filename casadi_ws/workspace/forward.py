@@ -27,6 +27,7 @@ import numpy as np
 from ..fem.model import StaticModel
 from ..runtime.executor import Executor, ProcessExecutor, deferred_interrupt, one_blas_thread
 from ..runtime.run_state import RunState, fingerprint
+from ..solvers.admissible import VIOLATIONS, admissibility
 from ..solvers.equilibrium import (CONVERGED, OUTSIDE_BOUNDS, Equilibrium, inside_bounds, newton_krylov,
                                    solve_equilibrium, tangent_factorization, verify)
 from .result import WorkspaceResult, describe
@@ -226,6 +227,7 @@ def _solve_line(model, us, first, settings, tol, sw: _Sweep, counters):
     out = [None] * n
     for j in newton:
         out[j] = _solve_point(model, us[j], first + j, settings, tol, sw, counters)
+        out[j].newton = True
     if stride == 1:
         return out
     axis = _line_axis(us[0], us[-1])
@@ -236,6 +238,7 @@ def _solve_line(model, us, first, settings, tol, sw: _Sweep, counters):
             continue
         if solved.size == 0:
             out[j] = _solve_point(model, us[j], first + j, settings, tol, sw, counters)
+            out[j].newton = True
             continue
         near = solved[np.argsort(np.abs(x[solved] - x[j]), kind="stable")[:_INTERPOLATION_POINTS]]
         guess = sum(w * out[k].q for w, k in zip(lagrange_weights(x[near], x[j]), near))
@@ -246,9 +249,31 @@ def _solve_line(model, us, first, settings, tol, sw: _Sweep, counters):
             k = near[0]
             eq = solve_equilibrium(model, us[j], q0=out[k].q, u0=us[k], guess=guess, tol=tol,
                                    max_iter=settings.max_iter)
+            eq.newton = True
             _count(counters, eq)
         out[j] = eq
     return out
+
+
+def _check_line(model, line) -> np.ndarray:
+    """Admissibility masks of a line's points (0 for points that did not converge). Newton points get every
+    check, with the pivots of their own LU; a point between two Newton points of the line inherits
+    stability and self-penetration from them when both pass those, and gets the cheap checks itself."""
+    masks = np.zeros(len(line), dtype=np.int64)
+    costly = ~np.int64(sum(1 << VIOLATIONS.index(v) for v in ("unstable", "self_penetration")))
+    done = np.zeros(len(line), dtype=bool)
+    for j, eq in enumerate(line):
+        if eq.status == CONVERGED and getattr(eq, "newton", False):
+            masks[j] = admissibility(model, eq.q, eq.u, eq.factorization).mask
+            done[j] = True
+    anchors = np.flatnonzero(done)
+    for j, eq in enumerate(line):
+        if done[j] or eq.status != CONVERGED:
+            continue
+        left, right = anchors[anchors < j], anchors[anchors > j]
+        inherit = left.size and right.size and not (masks[left[-1]] | masks[right[0]]) & ~costly
+        masks[j] = admissibility(model, eq.q, eq.u, eq.factorization, inherited=bool(inherit)).mask
+    return masks
 
 
 def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progress=None,
@@ -264,6 +289,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
     tips = np.full((n, 3), np.nan)
     status = np.zeros(n, dtype=int)
     residual = np.zeros(n)
+    violations = np.zeros(n, dtype=np.int64)
     states = np.zeros((n, model.n_dof)) if settings.store_states else None
     counters = dict(solves=0, newton_iterations=0, factorizations=0, load_steps=0, restarts=0,
                     krylov_iterations=0, interpolated=0, interpolation_failed=0)
@@ -273,6 +299,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
     if resume is not None:
         first = int(resume["next"])
         tips[:first], status[:first], residual[:first] = resume["tips"], resume["status"], resume["residual"]
+        violations[:first] = resume["violations"]
         if states is not None:
             states[:first] = resume["states"]
         counters.update(resume["counters"])
@@ -286,7 +313,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
             progress(first)
 
     def state(nxt):
-        st = dict(next=nxt, tips=tips[:nxt], status=status[:nxt], residual=residual[:nxt],
+        st = dict(next=nxt, tips=tips[:nxt], status=status[:nxt], residual=residual[:nxt], violations=violations[:nxt],
                   counters=dict(counters),
                   hist_u=np.array([h[0] for h in sw.history]).reshape(len(sw.history), model.n_u),
                   hist_q=np.array([h[1] for h in sw.history]).reshape(len(sw.history), model.n_dof),
@@ -308,6 +335,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
                 except KeyboardInterrupt:  # a second Ctrl-C mid-line: forget it, it is solved again on resume
                     sw.history, sw.fac, sw.start, counters = snapshot
                     raise
+                violations[a:b] = _check_line(model, line)
                 for j, eq in enumerate(line, start=a):
                     tips[j], status[j], residual[j] = eq.tip, eq.status, eq.residual
                     if states is not None and eq.status == CONVERGED:
@@ -323,7 +351,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
         if checkpoint is not None:
             checkpoint(state(done))
         raise
-    return tips, status, residual, states, counters
+    return tips, status, residual, violations, states, counters
 
 
 def _sweep_job(model, us, settings):
@@ -365,7 +393,7 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
     workers = max(1, min(int(workers), n // 50 or 1))
     fp = fingerprint("forward", model, {k: getattr(settings, k) for k in
                                         ("n_d", "predictor", "reuse_factorization", "krylov", "tol", "max_iter",
-                                         "store_states", "stride")} | {"workers": workers})
+                                         "store_states", "stride")} | {"workers": workers, "format": 2})
     run = RunState(checkpoint_dir, "forward", fp, resume, t0)
     try:
         if workers == 1:
@@ -378,14 +406,14 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
                 run.save({"next": st["next"], "counters": st["counters"]},
                          {k: v for k, v in st.items() if k not in ("next", "counters")})
 
-            tips, status, residual, states, counters = sweep(
+            tips, status, residual, violations, states, counters = sweep(
                 model, us, settings, progress=bar.update if bar else None, resume=resume_state,
                 checkpoint=checkpoint if checkpoint_dir is not None else None)
         else:
             own = executor is None
             executor = executor or ProcessExecutor(workers, problem)
             try:
-                tips, status, residual, states, counters = _parallel(problem, us, settings, workers, bar, run,
+                tips, status, residual, violations, states, counters = _parallel(problem, us, settings, workers, bar, run,
                                                                      executor)
             finally:
                 if own:
@@ -396,11 +424,17 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
     t_sweep = time.perf_counter() - t1
     run.finish()
 
-    ok = status == CONVERGED
+    converged = status == CONVERGED
+    excluded = converged & (violations != 0) & (not problem.admissibility.keep)
+    ok = converged & ~excluded
     counters["points"] = n
+    counters["excluded"] = {v: int(np.count_nonzero(excluded & (violations >> i & 1 == 1)))
+                            for i, v in enumerate(VIOLATIONS)}
+    arrays = dict(excluded_points=tips[excluded], excluded_u=us[excluded], excluded_violations=violations[excluded])
     return WorkspaceResult(
-        method="forward", points=tips[ok], u=us[ok], failed_u=us[~ok], failed_status=status[~ok],
-        failed_residual=residual[~ok], states=states[ok] if states is not None else None, counters=counters,
+        method="forward", points=tips[ok], u=us[ok], failed_u=us[~converged], failed_status=status[~converged],
+        failed_residual=residual[~converged], states=states[ok] if states is not None else None,
+        violations=violations[ok], arrays=arrays, counters=counters,
         timings={"build_model": t_model, "sweep": t_sweep, "total": run.elapsed(),
                  "per_point": t_sweep / n, "before_resume": run.previous},
         settings={**asdict(settings), "workers": workers}, problem=describe(problem, model), rest_tip=model.p0)
@@ -419,7 +453,7 @@ def _parallel(problem, us, settings, workers, bar, run: RunState, executor: Exec
         for i, c in saved_meta.get("pieces", {}).items():
             i = int(i)
             results[i] = (saved[f"tips_{i}"], saved[f"status_{i}"], saved[f"residual_{i}"],
-                          saved.get(f"states_{i}"), c)
+                          saved[f"violations_{i}"], saved.get(f"states_{i}"), c)
             if bar is not None:
                 bar.update(len(pieces[i]))
 
@@ -427,10 +461,11 @@ def _parallel(problem, us, settings, workers, bar, run: RunState, executor: Exec
         arrays = {}
         for i, r in enumerate(results):
             if r is not None:
-                arrays.update({f"tips_{i}": r[0], f"status_{i}": r[1], f"residual_{i}": r[2]})
-                if r[3] is not None:
-                    arrays[f"states_{i}"] = r[3]
-        run.save({"pieces": {i: r[4] for i, r in enumerate(results) if r is not None}}, arrays)
+                arrays.update({f"tips_{i}": r[0], f"status_{i}": r[1], f"residual_{i}": r[2],
+                               f"violations_{i}": r[3]})
+                if r[4] is not None:
+                    arrays[f"states_{i}"] = r[4]
+        run.save({"pieces": {i: r[5] for i, r in enumerate(results) if r is not None}}, arrays)
 
     todo = [i for i in range(len(pieces)) if results[i] is None]
     for k, r in executor.map_unordered(_sweep_job, problem, [(us[pieces[i]], settings) for i in todo]):
@@ -441,6 +476,7 @@ def _parallel(problem, us, settings, workers, bar, run: RunState, executor: Exec
     tips = np.vstack([r[0] for r in results])
     status = np.concatenate([r[1] for r in results])
     residual = np.concatenate([r[2] for r in results])
-    states = np.vstack([r[3] for r in results]) if settings.store_states else None
-    counters = {k: sum(r[4][k] for r in results) for k in results[0][4]}
-    return tips, status, residual, states, counters
+    violations = np.concatenate([r[3] for r in results])
+    states = np.vstack([r[4] for r in results]) if settings.store_states else None
+    counters = {k: sum(r[5][k] for r in results) for k in results[0][5]}
+    return tips, status, residual, violations, states, counters

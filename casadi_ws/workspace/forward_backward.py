@@ -35,6 +35,7 @@ import numpy as np
 from ..fem.model import StaticModel
 from ..runtime.executor import Executor, deferred_interrupt, make_executor, one_blas_thread
 from ..runtime.run_state import RunState, fingerprint
+from ..solvers.admissible import VIOLATIONS, admissibility, decode
 from ..solvers.equilibrium import CONVERGED, solve_equilibrium, tangent_factorization
 from ..solvers.sensitivity import bounded_step, closest_to_box, curvature, sensitivity
 from ..status import Status
@@ -94,6 +95,7 @@ class _Config:
     A: np.ndarray | None  # C K^-1 H^T at this configuration (Step 1)
     S: np.ndarray | None  # K^-1 H^T: the first Gauss-Newton step of its backward solves
     Q: np.ndarray | None = None  # d2q/du2: that step's second-order predictor (reduced backward only)
+    violations: int = 0  # admissibility violations (bit mask), non-zero only when they are kept
 
 
 def algorithm1(ex: Exploration, executor: Executor, ctrl_c) -> None:
@@ -128,14 +130,16 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings):
         res = backward(model, target, q, u, None, scale, bsettings, sens=sens)
         A_new = S_new = Q_new = None
         n_fac = res.factorizations
+        violations = 0
         if res.ok:
             fac = res.fac
             if fac is None:
                 fac = tangent_factorization(model, res.q, res.u)
                 n_fac += 1
+            violations = admissibility(model, res.q, res.u, fac).mask
             A_new, S_new, Q_new = _derivatives(model, res.q, res.u, fac, scale, bsettings.formulation)
         out.append((res.q, res.u, res.tip, res.status, res.ok, A_new, S_new, Q_new, res.equilibrium_solves,
-                    n_fac))
+                    n_fac, violations))
     return out
 
 
@@ -164,7 +168,7 @@ class Exploration:
         self.uniform = grid is not None
         self.counters = dict(iterations=0, explored=0, feasible=0, backward_solves=0, equilibrium_solves=0,
                              factorizations=0, not_reached=0, prefiltered=0, backward_failed=0, adopted=0,
-                             stopped_at_max_cells=False)
+                             inadmissible=0, excluded={n: 0 for n in VIOLATIONS}, stopped_at_max_cells=False)
         self.timings = {"step1_interval": 0.0, "step2_neighbourhood": 0.0, "step3_backward": 0.0}
         self.bsettings = settings.backward
         if self.bsettings.give_up is None and self.bsettings.formulation == "reduced":
@@ -174,6 +178,7 @@ class Exploration:
         self.visited = {start.cell}
         self.visited_pts = [start.p]
         self.failed_targets, self.failed_status = [], []
+        self.excluded = []  # (tip, u, violation mask) of the verified answers that are not admissible
         self.frontier = [start]
 
     # ------------------------------------------------------------------ the steps
@@ -254,12 +259,19 @@ class Exploration:
         target that solve aimed at: an answer that misses its target's cell but lands in a cell not reached
         yet is adopted there (uniform grid), so no verified equilibrium is thrown away."""
         new_frontier = []
+        keep_inadmissible = self.problem.admissibility.keep
         for (cfg, todo), out in zip(tasks, answers):
             eta = self.eta(cfg)
-            for (cell, target), (q, u, tip, status, ok, A, S, Q, n_eq, n_fac) in zip(todo, out):
+            for (cell, target), (q, u, tip, status, ok, A, S, Q, n_eq, n_fac, viol) in zip(todo, out):
                 self.counters["backward_solves"] += 1
                 self.counters["equilibrium_solves"] += n_eq
                 self.counters["factorizations"] += n_fac
+                if ok and viol and not keep_inadmissible:
+                    # verified but not a state the robot can take: kept apart, never a reached cell; its
+                    # neighbours are still explored from the configurations that are admissible
+                    self._exclude(tip, u, viol)
+                    self._fail(target, Status.INADMISSIBLE)
+                    continue
                 on_target = ok and np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9))
                 hit = on_target
                 if not hit:
@@ -273,15 +285,21 @@ class Exploration:
                         self.counters["explored"] += 1
                     if not on_target:
                         self.counters["adopted"] += 1
-                    new = _Config(cell, tip, q, u, A, S, Q)
+                    new = _Config(cell, tip, q, u, A, S, Q, viol)
                     new_frontier.append(new)
                     self.reached.append(new)
                     self.reached_cells.add(cell)
             cfg.S = cfg.Q = None  # expanded: no longer needed
         return new_frontier
 
+    def _exclude(self, tip, u, violations: int) -> None:
+        self.excluded.append((tip, u, violations))
+        for name in decode(violations):
+            self.counters["excluded"][name] += 1
+
     def _fail(self, target, status: Status) -> None:
-        key = {Status.PREFILTERED: "prefiltered", Status.NOT_REACHED: "not_reached"}.get(status, "backward_failed")
+        key = {Status.PREFILTERED: "prefiltered", Status.NOT_REACHED: "not_reached",
+               Status.INADMISSIBLE: "inadmissible"}.get(status, "backward_failed")
         self.counters[key] += 1
         self.failed_targets.append(target)
         self.failed_status.append(int(status))
@@ -313,7 +331,11 @@ class Exploration:
                       visited=np.array(sorted(self.visited)).reshape(-1, 3),
                       visited_pts=np.array(self.visited_pts).reshape(-1, 3),
                       failed_targets=np.array(self.failed_targets).reshape(-1, 3),
-                      failed_status=np.array(self.failed_status, dtype=int))
+                      failed_status=np.array(self.failed_status, dtype=int),
+                      violations=np.array([c.violations for c in reached], dtype=np.int64),
+                      excluded_p=np.array([e[0] for e in self.excluded]).reshape(-1, 3),
+                      excluded_u=np.array([e[1] for e in self.excluded]).reshape(-1, m.n_u),
+                      excluded_violations=np.array([e[2] for e in self.excluded], dtype=np.int64))
         if self.settings.store_states:
             arrays["q"] = np.array([c.q for c in reached])
         if all(reached[i].Q is not None for i in fr):  # reduced backward
@@ -332,12 +354,14 @@ class Exploration:
             self.reached.append(_Config(tuple(int(c) for c in a["cells"][i]), a["p"][i],
                                         a["frontier_q"][k] if f else (a["q"][i] if "q" in a else None), a["u"][i],
                                         a["frontier_A"][k] if f else None, a["frontier_S"][k] if f else None,
-                                        a["frontier_Q"][k] if f and "frontier_Q" in a else None))
+                                        a["frontier_Q"][k] if f and "frontier_Q" in a else None,
+                                        int(a["violations"][i])))
         self.frontier = [self.reached[i] for i in sorted(fset)]
         self.reached_cells = {c.cell for c in self.reached}
         self.visited = {tuple(int(c) for c in v) for v in a["visited"]}
         self.visited_pts = list(a["visited_pts"])
         self.failed_targets, self.failed_status = list(a["failed_targets"]), list(a["failed_status"])
+        self.excluded = list(zip(a["excluded_p"], a["excluded_u"], (int(v) for v in a["excluded_violations"])))
 
     def result(self, build_model: float) -> WorkspaceResult:
         self.counters["stopped_at_max_cells"] = bool(self.frontier)
@@ -356,12 +380,15 @@ class Exploration:
             arrays["cells"] = np.array([c.cell for c in reached], dtype=np.int64)
             arrays["cells_centres"] = np.array([self.grid.centre(c.cell) for c in reached])
             arrays["grid_origin"] = self.grid.origin
+        arrays.update(excluded_points=np.array([e[0] for e in self.excluded]).reshape(-1, 3),
+                      excluded_u=np.array([e[1] for e in self.excluded]).reshape(-1, self.model.n_u),
+                      excluded_violations=np.array([e[2] for e in self.excluded], dtype=np.int64))
         return WorkspaceResult(
             method="forward-backward", points=np.array([c.p for c in reached]), u=np.array([c.u for c in reached]),
             failed_u=np.array(failed_targets).reshape(-1, 3), failed_status=np.array(failed_status, dtype=int),
             failed_residual=np.full(len(failed_status), np.nan),
             states=np.array([c.q for c in reached]) if settings.store_states else None,
-            counters=self.counters, timings=timings, settings=asdict(settings),
+            violations=np.array([c.violations for c in reached], dtype=np.int64), counters=self.counters, timings=timings, settings=asdict(settings),
             problem=describe(self.problem, self.model), rest_tip=self.model.p0, arrays=arrays)
 
 
@@ -387,7 +414,7 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
         # checkpoint format 2: frontiers carry Q; a format-1 checkpoint would resume without it and so end
         # with another result than an uninterrupted run
         fp = fingerprint("forward-backward", model, asdict(settings) | {"workers": None, "progress": None,
-                                                                         "max_cells": None, "format": 2})
+                                                                         "max_cells": None, "format": 3})
         run = RunState(checkpoint_dir, "forward-backward", fp, resume, t0)
 
         own = executor is None
@@ -397,10 +424,15 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
             eq = solve_equilibrium(model, model.u_min.copy())
             if eq.status != CONVERGED:
                 raise RuntimeError(f"no equilibrium at u = u_min ({eq.status_name}); cannot start")
+            start_check = admissibility(model, eq.q, eq.u, eq.factorization)
+            if not start_check.admissible and not problem.admissibility.keep:
+                raise RuntimeError(f"the equilibrium at u = u_min is not admissible "
+                                   f"({', '.join(start_check.violations)}); cannot start")
             grid = Grid(eq.tip, settings.step) if settings.strategy == "uniform" else None
             A0, S0, Q0 = _derivatives(model, eq.q, eq.u, tangent_factorization(model, eq.q, eq.u), settings.step,
                                       settings.backward.formulation)
-            start = _Config(grid.index(eq.tip) if grid else (0, 0, 0), eq.tip, eq.q, eq.u.copy(), A0, S0, Q0)
+            start = _Config(grid.index(eq.tip) if grid else (0, 0, 0), eq.tip, eq.q, eq.u.copy(), A0, S0, Q0,
+                            start_check.mask)
             ex = Exploration(problem, model, settings, run, start, grid)
             ex.counters["equilibrium_solves"] += 1
             ex.counters["factorizations"] += 1

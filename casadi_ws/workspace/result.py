@@ -7,7 +7,7 @@ residual below tolerance and u inside U), their inputs, optionally their nodal s
 Files written by :meth:`WorkspaceResult.save` into a directory:
 
 ``summary.json``  method, n_points, n_failed, time_s, settings, counters, timings, problem description
-``points.csv``    one row per reachable point: x, y, z (m), u1..un (N)
+``points.csv``    one row per reachable point: x, y, z (m), u1..un (N), stable, admissible (0/1), violations
 ``failures.csv``  one row per failed point: u1..un, status, residual
 ``result.npz``    all arrays (points, u, failures, states if kept, cells for forward-backward)
 ``points.vtp``    the points as VTK PolyData with u as point data: opens in ParaView
@@ -44,6 +44,9 @@ class WorkspaceResult:
     """Relative residual reached by each failure."""
     states: np.ndarray | None = None
     """Nodal displacements of the reachable points (k, 3n), if kept."""
+    violations: np.ndarray | None = None
+    """Admissibility violations of each reported point, a bit mask (k,) (:mod:`casadi_ws.solvers.admissible`;
+    0: admissible). Non-zero only for points kept by ``keep_inadmissible``; None: not checked."""
     counters: dict = field(default_factory=dict)
     """solves, newton_iterations, factorizations, ... (method-specific)."""
     timings: dict = field(default_factory=dict)
@@ -64,6 +67,19 @@ class WorkspaceResult:
         return int(self.points.shape[0])
 
     @property
+    def admissible(self) -> np.ndarray:
+        """Whether each reported point passed every admissibility check, (k,)."""
+        return self._violations() == 0
+
+    @property
+    def stable(self) -> np.ndarray:
+        """Whether each reported point's tangent is positive definite, (k,)."""
+        return (self._violations() & 1) == 0
+
+    def _violations(self) -> np.ndarray:
+        return np.zeros(self.n_points, dtype=np.int64) if self.violations is None else np.asarray(self.violations)
+
+    @property
     def n_failed(self) -> int:
         return int(self.failed_status.shape[0])
 
@@ -75,6 +91,11 @@ class WorkspaceResult:
         if solves and failed / solves > FAILURE_WARNING:
             w.append(f"{failed} of {solves} solves failed ({100 * failed / solves:.0f} %, above "
                      f"{100 * FAILURE_WARNING:.0f} %): the estimate may miss parts of the workspace; see failures.csv")
+        excluded = {k: v for k, v in self.counters.get("excluded", {}).items() if v}
+        if excluded:
+            w.append(f"{len(self.arrays.get('excluded_violations', []))} verified equilibria were not admissible and "
+                     f"are not reported ({', '.join(f'{k}: {v}' for k, v in excluded.items())}); see "
+                     f"result.npz's excluded_* arrays")
         if self.counters.get("stopped_at_max_cells"):
             w.append(f"the exploration stopped at its budget of {self.settings.get('max_cells')} explored cells "
                      f"(--max-cells): the result holds what was verified so far; the same command with --resume "
@@ -86,6 +107,9 @@ class WorkspaceResult:
             "method": self.method,
             "n_points": self.n_points,
             "n_failed": self.n_failed,
+            "n_excluded": int(len(self.arrays.get("excluded_violations", []))),
+            "excluded_by_check": self.counters.get("excluded", {}),
+            "n_inadmissible_kept": int(np.count_nonzero(self._violations())),
             "warnings": self.warnings(),
             "time_s": float(self.timings.get("total", float("nan"))),
             "settings": self.settings,
@@ -105,10 +129,7 @@ class WorkspaceResult:
         d = Path(directory)
         d.mkdir(parents=True, exist_ok=True)
         (d / "summary.json").write_text(json.dumps(self.summary(), indent=2, default=_json_default) + "\n")
-        n_u = self.u.shape[1] if self.u.ndim == 2 else 0
-        header = ",".join(["x", "y", "z"] + [f"u{i + 1}" for i in range(n_u)])
-        np.savetxt(d / "points.csv", np.hstack([self.points, self.u.reshape(self.n_points, n_u)]),
-                   delimiter=",", header=header, comments="", fmt="%.10g")
+        self._save_points_csv(d / "points.csv")
         nf = self.failed_u.shape[1] if self.failed_u.ndim == 2 else 0
         fh = ",".join([f"u{i + 1}" for i in range(nf)] + ["status", "residual"])
         np.savetxt(d / "failures.csv", np.hstack([self.failed_u.reshape(self.n_failed, nf),
@@ -119,11 +140,23 @@ class WorkspaceResult:
                       **{f"extra_{k}": v for k, v in self.arrays.items()})
         if self.states is not None:
             arrays["states"] = self.states
+        arrays.update(stable=self.stable, admissible=self.admissible, violations=self._violations())
         np.savez_compressed(d / "result.npz", **arrays)
         self._save_vtp(d / "points.vtp")
         if "cells_centres" in self.arrays and len(self.arrays["cells_centres"]):
             self._save_cells(d / "cells.vtu")
         return d
+
+    def _save_points_csv(self, path: Path) -> None:
+        """x, y, z (m), u1..un, then stable, admissible (0/1) and the violated checks' names (``;``)."""
+        from ..solvers.admissible import decode
+
+        n_u = self.u.shape[1] if self.u.ndim == 2 else 0
+        head = ",".join(["x", "y", "z"] + [f"u{i + 1}" for i in range(n_u)] + ["stable", "admissible", "violations"])
+        nums = np.hstack([self.points, self.u.reshape(self.n_points, n_u)])
+        lines = [head] + [",".join(f"{v:.10g}" for v in row) + f",{int(s)},{int(a)},{';'.join(decode(m))}"
+                          for row, s, a, m in zip(nums, self.stable, self.admissible, self._violations())]
+        path.write_text("\n".join(lines) + "\n")
 
     def _save_cells(self, path: Path) -> None:
         """The reached cells as VTK voxels (forward-backward's W_E)."""
@@ -142,6 +175,8 @@ class WorkspaceResult:
         import pyvista as pv
 
         cloud = pv.PolyData(self.points if self.n_points else np.zeros((0, 3)))
+        cloud.point_data["stable"] = self.stable.astype(np.uint8)
+        cloud.point_data["admissible"] = self.admissible.astype(np.uint8)
         for i in range(self.u.shape[1] if self.u.ndim == 2 else 0):
             cloud.point_data[f"u{i + 1}"] = self.u[:, i]
         cloud.save(str(path))
@@ -164,6 +199,7 @@ def load_result(directory: str | Path) -> WorkspaceResult:
     return WorkspaceResult(
         method=summary["method"], points=a["points"], u=a["u"], failed_u=a["failed_u"],
         failed_status=a["failed_status"], failed_residual=a["failed_residual"], states=a.get("states"),
+        violations=a.get("violations"),
         counters=summary["counters"], timings=summary["timings"], settings=summary["settings"],
         problem=summary["problem"], rest_tip=a["rest_tip"],
         arrays={k[len("extra_"):]: v for k, v in a.items() if k.startswith("extra_")},
@@ -179,4 +215,5 @@ def describe(problem, model) -> dict:
         "actuators": [{"name": a.name, "kind": a.kind, "unit": a.input_unit} for a in model.actuators],
         "u_min": model.u_min.tolist(), "u_max": model.u_max.tolist(),
         "end_effector": np.asarray(problem.end_effector).tolist(), "tolerance": problem.solver.tolerance,
+        "admissibility": asdict(problem.admissibility),
     }

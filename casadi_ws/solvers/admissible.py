@@ -1,0 +1,369 @@
+"""What "verified" means beyond the residual: the configurations a robot can actually take.
+
+A converged equilibrium (relative residual below tolerance, u in U: :mod:`.equilibrium`) is *admissible* when
+none of these checks fails; each failure has a name, and the names form one vocabulary for every method,
+result file and summary (``VIOLATIONS``):
+
+==================  =============================================================================
+name                the equilibrium is refused when
+==================  =============================================================================
+unstable            the tangent K on the free dofs is not positive definite: for a symmetric K
+                    (linear, neo-Hookean laws; the actuators' terms are Hessians) it has a negative
+                    eigenvalue; for the corotational law, whose K is not symmetric, its eigenvalue of
+                    smallest real part is negative
+inverted            det F at some quadrature point is below ``min_det_F`` (default 0.1)
+self_penetration    a boundary sample of the deformed body (a boundary node, mid-edge nodes of
+                    10-node meshes included, or a boundary face's centroid) lies inside a tetrahedron
+                    that does not touch it, deeper than ``penetration_depth`` in barycentric terms
+stroke              a cable shortened by more than its ``stroke_max``
+volume              a cavity's volume exceeds its ``volume_max``
+stretch             a principal stretch exceeds the material's ``max_stretch``
+==================  =============================================================================
+
+How stability is decided, cheaply: the LU that Newton already holds (SuperLU, symmetric mode, diagonal
+pivots) is, when SuperLU swapped no rows, the L D U of K; the count of negative pivots is then the number of
+negative eigenvalues of a symmetric K (Sylvester's law of inertia), read off U's diagonal in ~0.3 ms. When
+the count is not zero, or rows were swapped, or K is not symmetric and the count is not zero, the
+eigenvalues of K nearest zero are computed by shift-invert (ARPACK) with a double-precision LU of K at the
+point itself, and the decision is the sign of the smallest real part among them. Arrays store violations
+as a bit mask (bit i: ``VIOLATIONS[i]``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse.linalg as sla
+
+__all__ = ["Admissibility", "AdmissibilitySettings", "VIOLATIONS", "admissibility", "admissible_equilibrium", "decode", "encode",
+           "penetrating_samples", "smallest_eigenvalues", "stable_branch"]
+
+VIOLATIONS = ("unstable", "inverted", "self_penetration", "stroke", "volume", "stretch")
+"""The names of the admissibility checks, in the order of their bits in stored masks."""
+
+
+@dataclass
+class AdmissibilitySettings:
+    """Which checks run and their tolerances (problem file: ``admissibility:``)."""
+
+    stability: bool = True
+    """Refuse equilibria whose tangent is not positive definite (see the module's table)."""
+    inversion: bool = True
+    """Refuse equilibria with det F below ``min_det_F`` at some quadrature point."""
+    self_penetration: bool = True
+    """Refuse equilibria whose deformed boundary passes through the body."""
+    min_det_F: float = 0.1
+    """Floor of det F (volume ratio) at every quadrature point: below it an element counts as inverted
+    (no law here is meant for a tenfold volumetric compression of a rubber)."""
+    penetration_depth: float = 0.01
+    """A boundary sample counts as inside a tetrahedron when all four of its barycentric coordinates there
+    exceed this (1 %: the margin that keeps a curved 10-node face's samples, judged against the straight
+    tetrahedron of its corners, out of their neighbours)."""
+    keep: bool = False
+    """Keep inadmissible equilibria among the reported points, marked (``--keep-inadmissible``); by
+    default they are counted and kept apart."""
+
+
+@dataclass
+class Admissibility:
+    """The admissibility checks of one converged equilibrium."""
+
+    violations: tuple[str, ...] = ()
+    """Names from ``VIOLATIONS`` of the checks that failed; empty: admissible."""
+    stable: bool = True
+    """K positive definite (see the module's table); True when the check is off."""
+    negative_pivots: int | None = None
+    """Negative pivots of the LU of K (None: rows were swapped, or the check is off)."""
+    smallest_eigenvalue: float | None = None
+    """Smallest real part among K's eigenvalues nearest zero (N/m), computed only when the pivots do not
+    settle stability."""
+    min_det_F: float = float("nan")
+    """Smallest det F over the quadrature points."""
+    max_stretch: float = float("nan")
+    """Largest principal stretch over the quadrature points."""
+    penetrating: int = 0
+    """Boundary samples inside the body."""
+    unstable_mode: np.ndarray | None = field(default=None, repr=False)
+    """The eigenvector (free dofs) of the negative eigenvalue, when one was computed."""
+
+    @property
+    def admissible(self) -> bool:
+        return not self.violations
+
+    @property
+    def mask(self) -> int:
+        return encode(self.violations)
+
+    def to_dict(self) -> dict:
+        return {"admissible": self.admissible, "stable": self.stable, "violations": list(self.violations),
+                "min_det_F": self.min_det_F, "max_stretch": self.max_stretch,
+                "negative_pivots": self.negative_pivots, "smallest_eigenvalue": self.smallest_eigenvalue,
+                "penetrating_samples": self.penetrating}
+
+
+def encode(names) -> int:
+    """The bit mask of violation names."""
+    return sum(1 << VIOLATIONS.index(n) for n in names)
+
+
+def decode(mask: int) -> tuple[str, ...]:
+    """The violation names of a bit mask."""
+    return tuple(n for i, n in enumerate(VIOLATIONS) if int(mask) >> i & 1)
+
+
+def admissibility(model, q: np.ndarray, u: np.ndarray, fac=None, K=None,
+                  settings: AdmissibilitySettings | None = None, inherited: bool = False) -> Admissibility:
+    """Every check of the module's table at the equilibrium (q, u).
+
+    ``fac``: an LU of K at q (or at the last Newton iterate before q), whose pivots decide stability when
+    they can; without it K is factorised here. ``inherited``: stability and self-penetration are known to
+    pass from the points around it (a forward point interpolated between Newton points of its grid line
+    that passed them), so only the cheap checks run.
+    """
+    s = settings or getattr(model.problem, "admissibility", None) or AdmissibilitySettings()
+    out = Admissibility()
+    names = []
+    F = model.deformation_gradients(q)
+    J = np.linalg.det(F)
+    out.min_det_F = float(J.min())
+    if s.inversion and not out.min_det_F > s.min_det_F:
+        names.append("inverted")
+    if s.stability and "inverted" not in names:
+        stable = True
+        if not inherited:
+            stable, out.negative_pivots, out.smallest_eigenvalue, out.unstable_mode = _stability(model, q, u, fac, K)
+        out.stable = bool(stable)
+        if not out.stable:
+            names.insert(0, "unstable")
+    elif "inverted" in names:
+        out.stable = False  # an inverted element has no meaningful tangent
+    if s.self_penetration and not inherited:
+        out.penetrating = int(penetrating_samples(model, q, s.penetration_depth).size)
+        if out.penetrating:
+            names.append("self_penetration")
+    names += _state_limits(model, q, F, out)
+    out.violations = tuple(n for n in VIOLATIONS if n in names)
+    return out
+
+
+def _state_limits(model, q, F, out: Admissibility) -> list[str]:
+    names = []
+    lo, hi, what = model.quantity_limits
+    if what:
+        Q = model.actuator_states(q)
+        slack = 1e-9 * np.maximum(np.abs(Q), 1e-30)
+        for a in np.flatnonzero((Q < lo - slack) | (Q > hi + slack)):
+            names.append(what[a])
+    C = np.einsum("mkji,mkjl->mkil", F, F)
+    lam = np.sqrt(np.maximum(np.linalg.eigvalsh(C)[..., -1], 0.0))  # (m, n_qp)
+    out.max_stretch = float(lam.max())
+    limit = model.max_stretch  # per element, inf where the material sets none
+    if np.any(lam.max(axis=1) > limit * (1 + 1e-12)):
+        names.append("stretch")
+    return names
+
+
+def _stability(model, q, u, fac, K):
+    """(stable, negative pivots, smallest eigenvalue or None, its mode or None); see the module."""
+    from .equilibrium import tangent_factorization
+
+    if fac is None or _stale(fac.q, q):
+        fac = tangent_factorization(model, q, u)
+    n_neg = fac.negative_pivots()
+    if n_neg == 0:
+        return True, 0, None, None
+    vals, vecs = smallest_eigenvalues(model, q, u, K)
+    k = int(np.argmin(vals.real))
+    lam = float(vals[k].real)
+    return lam >= 0.0, n_neg, lam, (vecs[:, k].real if lam < 0 else None)
+
+
+STALE = 0.01
+"""An LU computed at a state farther than this (relative, max-norm of the displacements) from the point is
+not used for its stability: Newton's chord steps reuse an LU over several iterates, and a column loaded from
+rest reuses the LU of the unloaded, stable state up to the straight, unstable one."""
+
+
+def _stale(q_lu: np.ndarray, q: np.ndarray) -> bool:
+    return bool(np.abs(q - q_lu).max() > STALE * max(np.abs(q).max(), 1e-300))
+
+
+def smallest_eigenvalues(model, q, u, K=None, k: int = 6):
+    """The ``k`` eigenvalues of K (free dofs) nearest zero and their vectors, by shift-invert with a
+    double-precision LU of K at (q, u)."""
+    from .equilibrium import factorize
+
+    if K is None:
+        K = model.residual_and_tangent(q, u)[1]
+    lu = factorize(K, single=False)
+    n = K.shape[0]
+    k = min(k, n - 2)
+    op = sla.LinearOperator(K.shape, matvec=lu.solve, dtype=float)
+    v0 = np.random.default_rng(0).standard_normal(n)  # fixed: results never depend on chance
+    vals, vecs = sla.eigs(K, k=k, sigma=0.0, OPinv=op, which="LM", v0=v0, tol=1e-8)
+    return vals, vecs
+
+
+def penetrating_samples(model, q: np.ndarray, depth: float = 0.01) -> np.ndarray:
+    """Indices of the boundary samples (see :func:`_samples`) lying inside a tetrahedron that does not
+    touch them, in the deformed configuration q.
+
+    Candidates are the samples within each tetrahedron's circumscribing ball about its centroid (KD-trees,
+    one per class of tetrahedra of similar size, so a graded mesh's large elements do not widen the search
+    of its small ones); the test is on barycentric coordinates in the straight tetrahedron of the corners.
+    """
+    from scipy.spatial import cKDTree
+
+    S = _samples(model)
+    x = model.positions(q)
+    corners = x[model.mesh.tets[:, :4]]  # (m, 4, 3): curved 10-node elements judged by their corners
+    centre = corners.mean(axis=1)
+    radius = np.linalg.norm(corners - centre[:, None], axis=2).max(axis=1) * (1 + 1e-9)
+    # fast path: a sample inside a tetrahedron is within its diameter of the tetrahedron's corners; when no
+    # two nodes are that close now and were more than NEAR_AT_REST rest diameters apart at rest, nothing
+    # distant has come into contact (a fold into the elements next to a sample is an inversion's business)
+    c = S.corner_nodes
+    pairs = c[cKDTree(x[c]).query_pairs(2.0 * float(radius.max()), output_type="ndarray")]
+    X = model.mesh.nodes
+    if not np.any(np.linalg.norm(X[pairs[:, 0]] - X[pairs[:, 1]], axis=1) > NEAR_AT_REST * S.diameter):
+        return np.zeros(0, dtype=np.int64)
+    pts = S.W @ x
+    samples = cKDTree(pts)
+    si, ti = [], []
+    size_class = np.floor(np.log2(radius / radius.max())).astype(int)
+    for c in np.unique(size_class):
+        tets = np.flatnonzero(size_class == c)
+        pairs = samples.sparse_distance_matrix(cKDTree(centre[tets]), float(radius[tets].max()),
+                                               output_type="ndarray")
+        t = tets[pairs["j"]]
+        keep = pairs["v"] <= radius[t]
+        si.append(pairs["i"][keep].astype(np.int64))
+        ti.append(t[keep])
+    si, ti = np.concatenate(si), np.concatenate(ti)
+    p = pts[si]
+    keep = np.all((p >= corners.min(axis=1)[ti]) & (p <= corners.max(axis=1)[ti]), axis=1)
+    si, ti = si[keep], ti[keep]
+    keep = ~_member(si * model.mesh.n_tets + ti, S.touching)
+    si, ti = si[keep], ti[keep]
+    if si.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    T = np.stack([corners[ti, 1] - corners[ti, 0], corners[ti, 2] - corners[ti, 0],
+                  corners[ti, 3] - corners[ti, 0]], axis=2)
+    ok = np.abs(np.linalg.det(T)) > 0
+    lam = np.full((si.size, 3), -1.0)
+    lam[ok] = np.linalg.solve(T[ok], (pts[si] - corners[ti, 0])[ok][..., None])[..., 0]
+    bary = np.column_stack([1.0 - lam.sum(axis=1), lam])
+    inside = np.all(bary > depth, axis=1)
+    return np.unique(si[inside])
+
+
+def _member(keys: np.ndarray, sorted_keys: np.ndarray) -> np.ndarray:
+    i = np.minimum(np.searchsorted(sorted_keys, keys), max(sorted_keys.size - 1, 0))
+    return sorted_keys[i] == keys if sorted_keys.size else np.zeros(keys.size, dtype=bool)
+
+
+@dataclass
+class _Samples:
+    W: object
+    """(s, n) sparse: sample positions from the node positions."""
+    touching: np.ndarray
+    """Sorted keys s * n_tets + e of the (sample, tetrahedron) pairs that touch at rest: not checked."""
+    diameter: float
+    """The largest tetrahedron's diameter at rest."""
+    corner_nodes: np.ndarray
+    """The nodes that are corners of some tetrahedron."""
+
+
+NEAR_AT_REST = 3.0
+"""Nodes closer than this many (largest) element diameters at rest are neighbours: their coming together is
+not looked into as self-penetration (see :func:`penetrating_samples`)."""
+
+
+def _samples(model) -> _Samples:
+    """The boundary nodes and the boundary faces' centroids, built once per model."""
+    cached = model.__dict__.get("_penetration_samples")
+    if cached is not None:
+        return cached
+    import scipy.sparse as sp
+
+    from ..fem.surface import boundary_faces
+
+    mesh = model.mesh
+    faces = boundary_faces(mesh)
+    nodes = np.unique(faces)
+    n, m, s_nodes = mesh.n_nodes, mesh.n_tets, nodes.size
+    rows = np.concatenate([np.arange(s_nodes), np.repeat(s_nodes + np.arange(len(faces)), 3)])
+    cols = np.concatenate([nodes, faces[:, :3].ravel()])
+    vals = np.concatenate([np.ones(s_nodes), np.full(3 * len(faces), 1.0 / 3.0)])
+    W = sp.csr_matrix((vals, (rows, cols)), shape=(s_nodes + len(faces), n))
+    # a sample touches the tetrahedra that hold any node it is made of; on 10-node meshes also their
+    # neighbours, whose straight corner tetrahedra a curved face next to them may enter
+    node_tets = sp.csr_matrix((np.ones(mesh.tets.size), (mesh.tets.ravel(), np.repeat(np.arange(m), mesh.tets.shape[1]))),
+                              shape=(n, m))
+    touch = (W != 0).astype(float) @ node_tets
+    if mesh.tets.shape[1] == 10:
+        touch = touch @ (node_tets.T @ node_tets)
+    touch = touch.tocoo()
+    keys = np.unique(touch.row.astype(np.int64) * m + touch.col)
+    corners = mesh.nodes[mesh.tets[:, :4]]
+    diameter = max(float(np.linalg.norm(corners[:, i] - corners[:, j], axis=1).max())
+                   for i in range(4) for j in range(i + 1, 4))
+    out = _Samples(W, keys, diameter, np.unique(mesh.tets[:, :4]))
+    model.__dict__["_penetration_samples"] = out
+    return out
+
+
+def stable_branch(model, q: np.ndarray, u: np.ndarray, mode: np.ndarray, tol: float | None = None,
+                  imperfection: float = 0.05, max_steps: int = 40):
+    """A stable equilibrium at u near the unstable one q, found as a real column with an imperfection
+    buckles: a small force along the unstable mode (``imperfection`` x the load) is applied from rest, which
+    follows the stable branch, and then removed in adaptive steps, each Newton from the last. Both signs of
+    the mode are tried. Returns a converged, stable :class:`.equilibrium.Equilibrium`, or None.
+    """
+    from .equilibrium import CONVERGED, solve_equilibrium
+
+    F0 = model.F
+    scale = max(float(np.linalg.norm(F0[model.free])), float(np.linalg.norm(model.actuation_matrix(q).T @ u)))
+    direction = np.zeros(model.n_dof)
+    direction[model.free] = mode / np.linalg.norm(mode)
+    no_penetration = AdmissibilitySettings(self_penetration=False, inversion=False)
+    try:
+        for sign in (1.0, -1.0):
+            eps, step, steps = imperfection, 0.5 * imperfection, 0
+            model.F = F0 + sign * eps * scale * direction
+            eq = solve_equilibrium(model, u, tol=tol)  # from rest, by continuation if need be
+            while eq.converged and eps > 0 and steps < max_steps:
+                steps += 1
+                e = max(eps - step, 0.0)
+                model.F = F0 + sign * e * scale * direction
+                nxt = solve_equilibrium(model, u, q0=eq.q, u0=u, guess=eq.q, tol=tol, continuation=False)
+                if nxt.converged:
+                    eq, eps, step = nxt, e, min(2 * step, e if e > 0 else step)
+                else:
+                    step *= 0.25
+            if eq.converged and eps == 0 and np.abs(eq.q - q).max() > 1e-6 * max(np.abs(q).max(), 1e-300):
+                model.F = F0
+                if admissibility(model, eq.q, u, eq.factorization, settings=no_penetration).stable:
+                    return eq
+    finally:
+        model.F = F0
+    return None
+
+
+def admissible_equilibrium(model, u, **kwargs):
+    """:func:`.equilibrium.solve_equilibrium`, then every admissibility check; an unstable equilibrium is
+    replaced by a stable one at the same u where :func:`stable_branch` finds it (a column loaded above its
+    buckling load comes out buckled). Returns (Equilibrium, Admissibility or None if not converged,
+    whether the stable branch was taken)."""
+    from .equilibrium import solve_equilibrium
+
+    eq = solve_equilibrium(model, u, **kwargs)
+    if not eq.converged:
+        return eq, None, False
+    adm = admissibility(model, eq.q, eq.u, eq.factorization)
+    if "unstable" in adm.violations and adm.unstable_mode is not None:
+        alt = stable_branch(model, eq.q, eq.u, adm.unstable_mode)
+        if alt is not None:
+            return alt, admissibility(model, alt.q, alt.u, alt.factorization), True
+    return eq, adm, False
