@@ -88,7 +88,7 @@ class _PermutedLU:
         self.K = K
 
     def negative_pivots(self) -> int | None:
-        if not np.array_equal(self.lu.perm_r, np.arange(self.lu.shape[0])):
+        if not np.array_equal(self.lu.perm_r, self.lu.perm_c):  # diagonal pivots: P K P^T = L U
             return None
         return int(np.count_nonzero(self.lu.U.diagonal() < 0))
 
