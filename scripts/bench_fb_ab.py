@@ -37,7 +37,8 @@ pb = cw.load_problem(problem)
 t = time.perf_counter()
 r = forward_backward(pb, FBSettings(workers=2, progress=False))
 c = r.counters
-print(json.dumps({"time": time.perf_counter() - t, "cells": c["feasible"], "lu": c["factorizations"]}))
+print(json.dumps({"time": time.perf_counter() - t, "cells": c["feasible"], "lu": c["factorizations"],
+                  "excluded": c.get("excluded")}))
 """
 
 
@@ -56,6 +57,7 @@ def main():
     ap.add_argument("--problems", type=int, nargs="+", default=[2, 3, 4])
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--section", default="fb-ab")
+    ap.add_argument("--issue", default="FB that misses nothing", help="the issue named in the section's title")
     args = ap.parse_args()
     base_rev = subprocess.run(["git", "rev-parse", "--short", args.base], cwd=ROOT, capture_output=True, text=True,
                               check=True).stdout.strip()
@@ -83,10 +85,13 @@ def main():
 
     def cell(rs):
         t = sum(r["time"] for r in rs) / len(rs)
-        return f"{t:.1f} s, {rs[0]['cells']} cells, {rs[0]['lu'] / rs[0]['cells']:.2f} LU / cell"
+        excluded = rs[0].get("excluded")
+        removed = "" if excluded is None else (
+            ", removed: " + (", ".join(f"{k} {v}" for k, v in excluded.items() if v) or "none"))
+        return f"{t:.1f} s, {rs[0]['cells']} cells, {rs[0]['lu'] / rs[0]['cells']:.2f} LU / cell{removed}"
 
     lines = [
-        f"## Forward-backward, this code against `{base_rev}` (issue: FB that misses nothing) — "
+        f"## Forward-backward, this code against `{base_rev}` (issue: {args.issue}) — "
         f"`scripts/bench_fb_ab.py --base {args.base}`",
         "",
         f"Machine: {machine()}. Problems `problems/trunk_{{2,3,4}}cables.yaml`, 4 mm grid, 2 worker processes, "

@@ -178,14 +178,15 @@ def test_stroke_limit_maps_to_the_tension_of_the_cable_compliance():
     assert abs(0.5 * (reported.max() + excluded.min()) / t_limit - 1) < 0.08
 
 
-def test_volume_and_stretch_limits_cut_where_the_state_crosses_them():
+def test_stretch_limit_cuts_where_the_state_crosses_it():
     pb = small_trunk("corotational", n_cables=1, gravity=False)
     m = cw.StaticModel(pb)
     us = np.linspace(0, 60, 7)
     stretch = []
     for u in us:
         eq = solve_equilibrium(m, [u])
-        stretch.append(admissibility(m, eq.q, eq.u).max_stretch)
+        F = m.deformation_gradients(eq.q)
+        stretch.append(np.sqrt(np.linalg.eigvalsh(np.swapaxes(F, -1, -2) @ F)[..., -1].max()))
     limit = 0.5 * (stretch[3] + stretch[4])
     pb2 = small_trunk("corotational", n_cables=1, gravity=False)
     pb2.material = Material("corotational", 1.8e7, 0.45, 1100.0, max_stretch=limit)
@@ -215,3 +216,41 @@ def test_equilibrium_command_reports_the_checks(tmp_path):
     out = json.loads(r.stdout)
     assert r.returncode == 0 and out["admissible"] and out["stable"] and out["violations"] == []
     assert 0.9 < out["min_det_F"] < 1.0
+
+
+def test_reach_keeps_a_cable_within_its_stroke():
+    # IPOPT gets the stroke as a constraint: a target beyond it returns the closest point at the limit
+    d = 0.004
+    pb = cantilever(n=1, slender=10, model="linear", nu=0.0, cable_offset=d, order=2)
+    m = cw.StaticModel(pb)
+    L0 = m.actuator_states(np.zeros(m.n_dof))[0]
+    far = solve_equilibrium(m, [1.0])
+    stroke = 0.5 * (L0 - m.actuator_states(far.q)[0])
+    pb.actuators[0].stroke_max = stroke
+    m = cw.StaticModel(pb)
+    r = cw.reach(m, far.tip)
+    assert not r.reachable and r.admissibility.admissible
+    assert L0 - m.actuator_states(r.q)[0] == pytest.approx(stroke, rel=1e-5)
+    assert 0.4 < r.u[0] < 0.6  # about half the tension, the law being (nearly) linear
+    free = cw.reach(cw.StaticModel(cantilever(n=1, slender=10, model="linear", nu=0.0, cable_offset=d, order=2)),
+                    far.tip)
+    assert free.reachable and free.u[0] == pytest.approx(1.0, rel=1e-4)
+
+
+def test_volume_limit_maps_to_lames_pressure(tmp_path):
+    # a thick hollow sphere (a = 10, b = 20 mm, 10-node tets, within 1 % of Lame): a chamber allowed to
+    # grow by Lame's volume change at 500 Pa is cut at 500 Pa
+    from test_cavity import lame_volume_change, sphere_problem_file
+
+    text = sphere_problem_file(tmp_path, "hollow_sphere_5mm_o2.vtu", 2).read_text()
+    pb0 = cw.load_problem(sphere_problem_file(tmp_path, "hollow_sphere_5mm_o2.vtu", 2))
+    V0 = pb0.actuators[0].rest_volume()
+    limit = V0 + lame_volume_change(500.0, 0.01, 0.02, 1e6, 0.3)
+    path = tmp_path / "limited.yaml"
+    path.write_text(text.replace("u_max: 1000}", f"u_max: 1000, volume_max: {limit!r}}}"))
+    pb = cw.load_problem(path)
+    assert pb.actuators[0].volume_max == pytest.approx(limit)
+    res = cw.forward(pb, n_d=21, settings=cw.ForwardSettings(progress=False))
+    top, cut = res.u[:, 0].max(), res.arrays["excluded_u"][:, 0].min()
+    assert res.counters["excluded"]["volume"] == res.arrays["excluded_u"].shape[0] > 0
+    assert top < cut and top <= 500 * 1.01 + 1e-9 and cut >= 500 * 0.99

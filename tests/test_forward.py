@@ -85,8 +85,9 @@ def test_result_round_trip_and_files(tmp_path):
     assert {"method", "n_points", "n_failed", "time_s", "settings"} <= set(s)
     assert s["n_points"] == 16 and s["settings"]["n_d"] == 4
     csv = np.loadtxt(tmp_path / "points.csv", delimiter=",", skiprows=1)
-    assert csv.shape == (16, 5)
-    assert (tmp_path / "points.csv").read_text().splitlines()[0] == "x,y,z,u1,u2"
+    assert csv.shape == (16, 8)
+    assert (tmp_path / "points.csv").read_text().splitlines()[0] == "x,y,z,u1,u2,stable,admissible,violations"
+    np.testing.assert_array_equal(csv[:, 5:], np.column_stack([np.ones(16), np.ones(16), np.zeros(16)]))
     vtp = pv.read(tmp_path / "points.vtp")
     assert vtp.n_points == 16 and "u2" in vtp.point_data
     assert res.states.shape == (16, 3 * pb.mesh.n_nodes)

@@ -310,6 +310,13 @@ def test_fb_with_ipopt_backward_runs_and_stays_quiet(capfd):
     out = capfd.readouterr().out
     assert "DMUMPS" not in out
     assert res.n_points >= 4 and res.counters["backward_solves"] >= res.n_points - 1
+    # cell for cell against the reduced backward on the same grid (measured: 18 of its 20 cells, all of them
+    # among its cells; the 2 others are edge cells whose closest point to the centre lies outside, which
+    # IPOPT's problem (8) aims at and the reduced backward's edge_box rule does not)
+    reduced = forward_backward(pb, FBSettings(step=0.012, progress=False))
+    ipopt_cells = {tuple(c) for c in res.arrays["cells"]}
+    reduced_cells = {tuple(c) for c in reduced.arrays["cells"]}
+    assert ipopt_cells <= reduced_cells and len(ipopt_cells) >= 0.9 * len(reduced_cells)
 
 
 def test_fb_result_does_not_depend_on_the_number_of_workers():
@@ -335,7 +342,9 @@ def test_relative_strategy_explores_with_steps_relative_to_the_distance():
     for u, p in zip(fb.u[::4], fb.points[::4]):
         assert np.linalg.norm(solve_equilibrium(model, u).tip - p) < 1e-7
     fw = forward(pb, settings=ForwardSettings(n_d=11, progress=False), model=model)
-    assert compare(fw, fb, step=eta)["coverage_within_one_cell"] >= 0.9
+    # strict: the share of the forward cloud's cells (grid of step eta) that hold a forward-backward point
+    # (measured 0.979: 47 of 48)
+    assert compare(fw, fb, step=eta)["cells_a_in_b"] >= 0.97
 
 
 def test_every_cell_of_a_known_flat_workspace_is_reported():

@@ -23,6 +23,7 @@ from ..solvers.equilibrium import CONVERGED, solve_equilibrium
 from ..status import Status
 from ..fem.model import StaticModel
 from ..nlp.formulations import EquilibriumNLP, tracking
+from ..solvers.admissible import Admissibility, admissibility
 
 __all__ = ["FollowResult", "ReachResult", "ReachSettings", "follow", "reach"]
 
@@ -57,11 +58,16 @@ class ReachResult:
     iterations: int
     q: np.ndarray
     homotopy: bool = False
+    admissibility: Admissibility | None = None
+    """The admissibility checks of the returned equilibrium (None: it failed); a target is reachable only
+    by an admissible one."""
 
     def to_dict(self) -> dict:
+        adm = self.admissibility
         return {"reachable": self.reachable, "u": self.u.tolist(), "tip": self.tip.tolist(),
                 "error": self.error, "status": Status(self.status).label, "status_code": int(self.status),
-                "iterations": self.iterations,
+                "admissible": bool(adm and adm.admissible), "stable": bool(adm and adm.stable),
+                "violations": list(adm.violations) if adm else [], "iterations": self.iterations,
                 "homotopy": self.homotopy, "units": {"tip": "m", "u": "N", "error": "m"}}
 
 
@@ -111,8 +117,9 @@ def reach(problem_or_model, target, q0=None, u0=None, settings: ReachSettings | 
         return ReachResult(False, u0, model.tip(q0), float(np.linalg.norm(model.tip(q0) - target)),
                            Status.SOLVE_FAILED, its, q0, used_homotopy)
     err = float(np.linalg.norm(eq.tip - target))
-    return ReachResult(err <= settings.tolerance, eq.u, eq.tip, err,
-                       Status.CONVERGED if ok else Status.ITERATION_LIMIT, its, eq.q, used_homotopy)
+    adm = admissibility(model, eq.q, eq.u, eq.factorization)
+    return ReachResult(err <= settings.tolerance and adm.admissible, eq.u, eq.tip, err,
+                       Status.CONVERGED if ok else Status.ITERATION_LIMIT, its, eq.q, used_homotopy, adm)
 
 
 @dataclass

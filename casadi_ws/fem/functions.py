@@ -27,7 +27,7 @@ import scipy.sparse as sp
 
 from .mesh import embed
 
-__all__ = ["point_function", "residual_function"]
+__all__ = ["point_function", "quantity_function", "residual_function"]
 
 
 class _Pattern:
@@ -315,3 +315,17 @@ def point_function(model, points=None) -> ca.Function:
     Wd = ca.DM(ca.Sparsity(W.shape[0], W.shape[1], W.indptr.tolist(), W.indices.tolist()), W.data)
     p = ca.mtimes(Wd, q) + ca.DM(p0)
     return ca.Function("p", [q], [ca.reshape(p, 3, k)], ["q"], ["p"])
+
+
+def quantity_function(model) -> ca.Function:
+    """``Q(q)``: each actuator's quantity (a cable's length in m, a cavity's volume in m^3), (n_u,), as a
+    CasADi Function of the free dofs: the actuators' own SX function of their points, which are linear in q,
+    so its derivatives are exact (the state limits of :mod:`casadi_ws.solvers.admissible` as constraints)."""
+    q = ca.SX.sym("q", model.n_free)
+    if not model.n_u:
+        return ca.Function("Q", [q], [ca.SX(0, 1)], ["q"], ["Q"])
+    W = sp.csc_matrix(model._W_all[:, model.free])
+    W.sort_indices()
+    Wd = ca.DM(ca.Sparsity(W.shape[0], W.shape[1], W.indptr.tolist(), W.indices.tolist()), W.data)
+    P = ca.mtimes(Wd, q) + ca.DM(model._W_all @ model.X)
+    return ca.Function("Q", [q], [model._actuators_qg(P)[0]], ["q"], ["Q"])

@@ -25,7 +25,7 @@ from .mesh import embed
 
 __all__ = ["ROUNDOFF", "StaticModel"]
 
-ROUNDOFF = 100 * np.finfo(float).eps
+ROUNDOFF = 20 * np.finfo(float).eps
 """Relative round-off allowed in the assembled internal forces: at rest (zero load) a residual below
 ROUNDOFF x the elements' force scale counts as zero (measured at rest: ~3 eps for every law and order)."""
 
@@ -237,8 +237,16 @@ class StaticModel:
 
     def deformation_gradients(self, q: np.ndarray) -> np.ndarray:
         """F = I + du/dX at every quadrature point, (m, n_qp, 3, 3)."""
-        ue = q[self._edofs].reshape(self.mesh.n_tets, self.element.n_nodes, 3)
-        return np.eye(3) + np.einsum("mai,mkaj->mkij", ue, self._G_qp)
+        if "_F_op" not in self.__dict__:
+            # F_ij at (element e, point k) = delta_ij + sum_a q[3 node_a + i] G[e, k, a, j]: a sparse map of q
+            m, nq, nn, _ = self._G_qp.shape
+            e, k, a, i, j = np.meshgrid(np.arange(m), np.arange(nq), np.arange(nn), np.arange(3), np.arange(3),
+                                        indexing="ij")
+            rows = (((e * nq + k) * 3 + i) * 3 + j).ravel()
+            cols = (3 * self.mesh.tets[e, a] + i).ravel()
+            self._F_op = sp.csr_matrix((self._G_qp[e, k, a, j].ravel(), (rows, cols)), shape=(m * nq * 9, self.n_dof))
+        m, nq = self._G_qp.shape[:2]
+        return np.eye(3) + (self._F_op @ q).reshape(m, nq, 3, 3)
 
     def internal_force(self, q: np.ndarray) -> np.ndarray:
         """f_int(q) on all dofs (3n,)."""

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ..fem.functions import point_function, residual_function
+from ..fem.functions import point_function, quantity_function, residual_function
 from ..solvers.rootfinder import quiet_stdout, register_solver
 
 __all__ = ["EquilibriumNLP", "IPOPT_OPTIONS", "NLPSolution", "quiet_stdout", "release_solvers", "tracking"]
@@ -71,7 +71,9 @@ class NLPSolution:
 
 
 class EquilibriumNLP:
-    """min f(q, u; p)  s.t.  R(q, u) = 0,  lower <= g(q, u; p) <= upper,  u in U (see the module docstring).
+    """min f(q, u; p)  s.t.  R(q, u) = 0,  lower <= g(q, u; p) <= upper,  u in U (see the module docstring);
+    the problem's state limits on the actuators' quantities (``stroke_max``, ``volume_max``) are constraints
+    from the start.
 
     ``q`` (MX, the free dofs) and ``u`` (MX) are the variables; ``R`` is the model's residual Function.
     """
@@ -88,6 +90,10 @@ class EquilibriumNLP:
         self._solver = None
         self._lam_g = None
         register_solver(self)
+        lo, hi, names = model.quantity_limits
+        if names:  # the state limits (a cable's stroke, a chamber's volume), as IPOPT constraints
+            limited = [a for a, n in enumerate(names) if n]
+            self.subject_to(self.quantities()[limited], lower=lo[limited], upper=hi[limited])
 
     def release(self) -> None:
         """Drop the IPOPT solver (rebuilt on the next solve), quietly."""
@@ -104,6 +110,10 @@ class EquilibriumNLP:
     def point(self, points=None) -> ca.MX:
         """Positions (3 x k) of embedded points at q; default the end-effector (3 x 1)."""
         return point_function(self.model, points)(self.q)
+
+    def quantities(self) -> ca.MX:
+        """The actuators' quantities Q(q) (n_u,): cable lengths (m), cavity volumes (m^3)."""
+        return quantity_function(self.model)(self.q)
 
     def minimize(self, expr) -> None:
         """Add a term to the objective."""

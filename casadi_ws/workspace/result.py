@@ -8,6 +8,7 @@ Files written by :meth:`WorkspaceResult.save` into a directory:
 
 ``summary.json``  method, n_points, n_failed, time_s, settings, counters, timings, problem description
 ``points.csv``    one row per reachable point: x, y, z (m), u1..un (N), stable, admissible (0/1), violations
+                  (bit mask: ``summary.json``'s ``violation_bits``)
 ``failures.csv``  one row per failed point: u1..un, status, residual
 ``result.npz``    all arrays (points, u, failures, states if kept, cells for forward-backward)
 ``points.vtp``    the points as VTK PolyData with u as point data: opens in ParaView
@@ -21,6 +22,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from ..solvers.admissible import VIOLATIONS
 
 __all__ = ["FAILURE_WARNING", "WorkspaceResult", "describe", "load_result"]
 
@@ -110,6 +113,7 @@ class WorkspaceResult:
             "n_excluded": int(len(self.arrays.get("excluded_violations", []))),
             "excluded_by_check": self.counters.get("excluded", {}),
             "n_inadmissible_kept": int(np.count_nonzero(self._violations())),
+            "violation_bits": {name: 1 << i for i, name in enumerate(VIOLATIONS)},
             "warnings": self.warnings(),
             "time_s": float(self.timings.get("total", float("nan"))),
             "settings": self.settings,
@@ -148,15 +152,13 @@ class WorkspaceResult:
         return d
 
     def _save_points_csv(self, path: Path) -> None:
-        """x, y, z (m), u1..un, then stable, admissible (0/1) and the violated checks' names (``;``)."""
-        from ..solvers.admissible import decode
-
+        """x, y, z (m), u1..un, then stable, admissible (0/1) and the violations' bit mask (all numbers, so
+        any CSV reader takes the file; bit i is ``VIOLATIONS[i]``, listed in summary.json)."""
         n_u = self.u.shape[1] if self.u.ndim == 2 else 0
         head = ",".join(["x", "y", "z"] + [f"u{i + 1}" for i in range(n_u)] + ["stable", "admissible", "violations"])
-        nums = np.hstack([self.points, self.u.reshape(self.n_points, n_u)])
-        lines = [head] + [",".join(f"{v:.10g}" for v in row) + f",{int(s)},{int(a)},{';'.join(decode(m))}"
-                          for row, s, a, m in zip(nums, self.stable, self.admissible, self._violations())]
-        path.write_text("\n".join(lines) + "\n")
+        data = np.hstack([self.points, self.u.reshape(self.n_points, n_u), self.stable[:, None],
+                          self.admissible[:, None], self._violations()[:, None]])
+        np.savetxt(path, data, delimiter=",", header=head, comments="", fmt=["%.10g"] * (3 + n_u) + ["%d"] * 3)
 
     def _save_cells(self, path: Path) -> None:
         """The reached cells as VTK voxels (forward-backward's W_E)."""
