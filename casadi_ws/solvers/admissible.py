@@ -97,7 +97,8 @@ class Admissibility:
 
     def to_dict(self) -> dict:
         return {"admissible": self.admissible, "stable": self.stable, "violations": list(self.violations),
-                "min_det_F": self.min_det_F, "max_stretch": self.max_stretch,
+                "min_det_F": self.min_det_F,
+                "max_stretch": self.max_stretch if np.isfinite(self.max_stretch) else None,
                 "negative_pivots": self.negative_pivots, "smallest_eigenvalue": self.smallest_eigenvalue,
                 "penetrating_samples": self.penetrating}
 
