@@ -254,3 +254,22 @@ def test_volume_limit_maps_to_lames_pressure(tmp_path):
     top, cut = res.u[:, 0].max(), res.arrays["excluded_u"][:, 0].min()
     assert res.counters["excluded"]["volume"] == res.arrays["excluded_u"].shape[0] > 0
     assert top < cut and top <= 500 * 1.01 + 1e-9 and cut >= 500 * 0.99
+
+
+def test_forward_backward_reaches_the_cells_up_to_a_stroke_limit():
+    # the reduced backward keeps its steps within the linearised stroke, so the cells along the limit are
+    # reached (measured: all 11 of the forward cloud's cells; without the limit in the step, 9) and no
+    # reported point is beyond it
+    pb = small_trunk("corotational", n_cables=2)
+    m = cw.StaticModel(pb)
+    L0 = m.actuator_states(np.zeros(m.n_dof))[0]
+    stroke = L0 - m.actuator_states(solve_equilibrium(m, [50.0, 0.0]).q)[0]
+    pb.actuators[0].stroke_max = stroke
+    fb = cw.forward_backward(pb, cw.FBSettings(step=0.008, progress=False))
+    fw = cw.forward(pb, n_d=31, settings=cw.ForwardSettings(progress=False))
+    assert fw.counters["excluded"]["stroke"] > 0
+    assert cw.compare(fw, fb)["cells_a_in_b"] >= 0.95
+    m = cw.StaticModel(pb)
+    for u, p in zip(fb.u, fb.points):
+        eq = solve_equilibrium(m, u)
+        assert np.allclose(eq.tip, p, atol=1e-7) and L0 - m.actuator_states(eq.q)[0] <= stroke * (1 + 1e-9)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["bounded_step", "closest_to_box", "curvature", "second_order", "sensitivity"]
+__all__ = ["bounded_step", "closest_to_box", "curvature", "limited_step", "second_order", "sensitivity"]
 
 
 def sensitivity(model, q, fac, K=None) -> tuple[np.ndarray, np.ndarray]:
@@ -159,3 +159,25 @@ def closest_to_box(A: np.ndarray, r: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     du = x[:n]
     gap = max(0.0, float(np.abs(A @ du - r).max()) - half_width)
     return du, gap
+
+
+def limited_step(A, r, lo, hi, G, g_lo, g_hi, du):
+    """``du`` (a step within lo <= du <= hi), or, if it breaks a linearised state limit g_lo <= G du <= g_hi
+    (rows: the limited actuators' quantities, G = dQ/du), the closest step that keeps them: min |A du - r|
+    over the box and the limits (SLSQP, a few actuators only; called only when a limit is hit)."""
+    G = np.atleast_2d(np.asarray(G, dtype=float))
+    if G.size == 0:
+        return du
+    slack = 1e-9 * np.maximum(1.0, np.abs(G).sum(axis=1) * np.abs(du).max())
+    if np.all(G @ du >= g_lo - slack) and np.all(G @ du <= g_hi + slack):
+        return du
+    from scipy.optimize import minimize
+
+    cons = [{"type": "ineq", "fun": (lambda x, i=i: G[i] @ x - g_lo[i]), "jac": (lambda x, i=i: G[i])}
+            for i in range(G.shape[0]) if np.isfinite(g_lo[i])]
+    cons += [{"type": "ineq", "fun": (lambda x, i=i: g_hi[i] - G[i] @ x), "jac": (lambda x, i=i: -G[i])}
+             for i in range(G.shape[0]) if np.isfinite(g_hi[i])]
+    res = minimize(lambda x: 0.5 * float(np.sum((A @ x - r) ** 2)), np.zeros_like(du),
+                   jac=lambda x: A.T @ (A @ x - r), bounds=list(zip(lo, hi)), constraints=cons, method="SLSQP",
+                   options={"ftol": 1e-14, "maxiter": 200})
+    return np.clip(res.x, lo, hi)

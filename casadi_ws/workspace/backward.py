@@ -8,7 +8,8 @@ solved from a nearby equilibrium (the neighbour the target came from). Formulati
 ``reduced``  Gauss-Newton in u only. At the current equilibrium, A = C K^-1 H^T (one LU, n_u solves) maps
              du to the tip; a bounded linear least-squares problem gives du; the equilibrium at u + du is
              corrected by Newton from the predictor q + K^-1 H^T du. Repeated until the step is small. Each
-             iterate is a verified equilibrium, so the answer always is one.
+             iterate is a verified equilibrium, so the answer always is one. A step is kept within the
+             problem's state limits (stroke, volume), linearised at the iterate.
 ``ipopt``    the full-space NLP over (q, u) (:func:`casadi_ws.nlp.formulations.tracking`), with exact derivatives
              from the model's CasADi Functions and a primal-dual warm start; the answer is then re-verified.
 
@@ -25,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..solvers.equilibrium import CONVERGED, Factorization, solve_equilibrium, tangent_factorization
-from ..solvers.sensitivity import bounded_step, closest_to_box, second_order, sensitivity
+from ..solvers.sensitivity import bounded_step, closest_to_box, limited_step, second_order, sensitivity
 from ..status import Status
 
 __all__ = ["BackwardResult", "BackwardSettings", "backward"]
@@ -122,6 +123,7 @@ def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardRe
             du_box, _ = closest_to_box(A, target - tip, model.u_min - u, model.u_max - u, settings.edge_box * scale)
             if np.abs(tip + A @ du_box - target).max() < miss:
                 du = du_box
+        du = _within_limits(model, q, u, A, S, target - tip, du)
         if not np.any(du):
             return BackwardResult(q, u, tip, SOLVED, it - 1, n_eq, n_fac, fac)
         if settings.give_up is not None and it > 1 and \
@@ -147,6 +149,27 @@ def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardRe
         if settings.stop_inside is not None and np.all(np.abs(tip - target) <= settings.stop_inside * scale):
             return BackwardResult(q, u, tip, SOLVED, it, n_eq, n_fac, fac)
     return BackwardResult(q, u, tip, ITERATION_LIMIT, settings.max_iterations, n_eq, n_fac, fac)
+
+
+LIMIT_MARGIN = 0.02
+"""Share of the distance to a state limit that a reduced backward step leaves (see :func:`_within_limits`)."""
+
+
+def _within_limits(model, q, u, A, S, r, du):
+    """The step kept within the problem's state limits (a cable's stroke, a chamber's volume), linearised at
+    q: Q(u + du) ~ Q + dQ/dq S du (:func:`casadi_ws.solvers.sensitivity.limited_step`)."""
+    lo, hi, names = model.quantity_limits
+    rows = [a for a, n in enumerate(names) if n]
+    if not rows:
+        return du
+    Q, dQ, _ = model.actuator_terms(q)
+    G = dQ[rows][:, model.free] @ S
+    # 98 % of the way to a limit: the linearisation would otherwise land the equilibrium a hair beyond it
+    g_lo, g_hi = lo[rows] - Q[rows], hi[rows] - Q[rows]
+    with np.errstate(invalid="ignore"):  # unlimited sides stay infinite
+        g_lo = np.where(np.isfinite(g_lo), g_lo + LIMIT_MARGIN * np.abs(g_lo), g_lo)
+        g_hi = np.where(np.isfinite(g_hi), g_hi - LIMIT_MARGIN * np.abs(g_hi), g_hi)
+    return limited_step(A, r, model.u_min - u, model.u_max - u, G, g_lo, g_hi, du)
 
 
 def backward_ipopt(model, target, q, u, settings):
