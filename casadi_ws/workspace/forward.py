@@ -27,7 +27,7 @@ import numpy as np
 from ..fem.model import StaticModel
 from ..runtime.executor import Executor, ProcessExecutor, deferred_interrupt, one_blas_thread
 from ..runtime.run_state import RunState, fingerprint
-from ..solvers.admissible import VIOLATIONS, admissibility
+from ..solvers.admissible import VIOLATIONS, admissibility, encode
 from ..solvers.equilibrium import (CONVERGED, OUTSIDE_BOUNDS, Equilibrium, inside_bounds, newton_krylov,
                                    solve_equilibrium, tangent_factorization, verify)
 from .result import WorkspaceResult, describe
@@ -260,7 +260,7 @@ def _check_line(model, line) -> np.ndarray:
     check, with the pivots of their own LU; a point between two Newton points of the line inherits
     stability and self-penetration from them when both pass those, and gets the cheap checks itself."""
     masks = np.zeros(len(line), dtype=np.int64)
-    costly = ~np.int64(sum(1 << VIOLATIONS.index(v) for v in ("unstable", "self_penetration")))
+    costly = encode(("unstable", "self_penetration"))
     done = np.zeros(len(line), dtype=bool)
     for j, eq in enumerate(line):
         if eq.status == CONVERGED and getattr(eq, "newton", False):
@@ -271,7 +271,7 @@ def _check_line(model, line) -> np.ndarray:
         if done[j] or eq.status != CONVERGED:
             continue
         left, right = anchors[anchors < j], anchors[anchors > j]
-        inherit = left.size and right.size and not (masks[left[-1]] | masks[right[0]]) & ~costly
+        inherit = left.size and right.size and not (masks[left[-1]] | masks[right[0]]) & costly
         masks[j] = admissibility(model, eq.q, eq.u, eq.factorization, inherited=bool(inherit)).mask
     return masks
 
