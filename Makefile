@@ -15,8 +15,12 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/casadi-ws demo
 
+# the report's browser test needs a chromium: Debian's package, installed once if missing (as root)
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	@command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1 || \
+	  { [ "$$(id -u)" = 0 ] && apt-get install -y -q chromium >/dev/null 2>&1; } || \
+	  echo "make test: no chromium and it could not be installed: the report's browser test will skip (with this reason)"
+	$(BIN)/python -m pytest -q -rs
 
 paper: $(STAMP)
 	$(BIN)/python scripts/reproduce_paper.py

@@ -176,6 +176,7 @@ def cmd_solve(args) -> int:
         settings = FBSettings(step=args.step, strategy=args.strategy, progress=not args.quiet,
                               backward=BackwardSettings(formulation=args.backward), store_states=args.store_states,
                               workers=args.workers, max_cells=args.max_cells)
+        settings.boundary.enabled = not args.no_boundary
         run = lambda: forward_backward(problem, settings, checkpoint_dir=out, resume=mode == "resume",  # noqa: E731
                                        executor=executor)
     if mode == "done":
@@ -194,12 +195,65 @@ def cmd_solve(args) -> int:
     from .workspace.measures import measures
 
     try:
+        if result.method == "forward" and not args.no_boundary:
+            from .workspace.boundary import boundary_of
+
+            result.boundary = boundary_of(result, problem)
         result.measures = measures(result, step=args.step, task=task)
         write_outputs(result, problem, out, args.quiet)
     except KeyboardInterrupt:  # after the run: its result files may be incomplete
         print(f"casadi-ws: interrupted while writing the results into {out}; some files may be missing: run the "
               f"same command with --overwrite to compute them again", file=sys.stderr)
         return 130
+    return 0
+
+
+def _result_dir(d) -> Path:
+    if not (Path(d) / "summary.json").is_file() or not (Path(d) / "result.npz").is_file():
+        raise UsageError(f"{d}: not a result directory (no summary.json and result.npz)")
+    return Path(d)
+
+
+def _problem_of(result, given):
+    """The problem a result was computed from: --problem, else the file named in its summary."""
+    src = given or result.problem.get("source")
+    if not src or not Path(src).is_file():
+        raise UsageError(f"--problem: the result's problem file {src!r} is not found; give it with --problem")
+    return _load(src)
+
+
+def cmd_boundary(args) -> int:
+    from .io.output import write_outputs
+    from .workspace.boundary import BoundarySettings, boundary_of
+    from .workspace.measures import measures
+    from .workspace.result import load_result
+
+    d = _result_dir(args.result)
+    if args.n < 3 or args.n % 2 == 0:
+        raise UsageError(f"--n: expected an odd integer >= 3, got {args.n}")
+    result = load_result(d)
+    problem = _problem_of(result, args.problem)
+    result.boundary = boundary_of(result, problem, settings=BoundarySettings(n=args.n))
+    result.measures = measures(result, task=None) | {k: v for k, v in result.measures.items() if k.startswith("task")}
+    write_outputs(result, problem, d, quiet=True)
+    b = result.boundary.summary()
+    print(json.dumps({"boundary": b, "volume": result.measures["volume"],
+                      "volume_method": result.measures["volume_method"]}, indent=2, default=float))
+    return 0
+
+
+def cmd_report(args) -> int:
+    from .io.report import write_report
+    from .workspace.result import load_result
+
+    d = _result_dir(args.result)
+    result = load_result(d)
+    mesh = None
+    src = args.problem or result.problem.get("source")
+    if src and Path(src).is_file():
+        mesh = _load(src).mesh
+    out = write_report(result, args.out or d / "report.html", mesh)
+    print(out)
     return 0
 
 
@@ -385,7 +439,21 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--task-box", default=None, metavar="X0,Y0,Z0,X1,Y1,Z1",
                    help="a task region (m): summary.json reports the share of it the workspace reaches")
     s.add_argument("--task-points", default=None, metavar="CSV", help="task points x,y,z (m), instead of a box")
+    s.add_argument("--no-boundary", action="store_true",
+                   help="do not build the boundary surface (the volume is then the cells')")
     s.set_defaults(func=cmd_solve)
+
+    b = sub.add_parser("boundary", help="build the boundary surface, volume and area of an existing result")
+    b.add_argument("result", help="result directory")
+    b.add_argument("--n", type=int, default=5, help="nodes per edge of each face of U, odd (5; forward: its n_d)")
+    b.add_argument("--problem", default=None, help="the problem file (default: the one named in summary.json)")
+    b.set_defaults(func=cmd_boundary)
+
+    rp = sub.add_parser("report", help="an interactive HTML page of a result (self-contained, works offline)")
+    rp.add_argument("result", help="result directory")
+    rp.add_argument("--out", default=None, help="the page to write (RESULT/report.html)")
+    rp.add_argument("--problem", default=None, help="the problem file, for the robot at rest (default: summary's)")
+    rp.set_defaults(func=cmd_report)
 
     for name, helptext in (("reach", "cable tensions that bring the tip to a target (inverse model)"),
                            ("follow", "reach a sequence of targets from a CSV file, each warm-started")):

@@ -85,11 +85,12 @@ def test_result_round_trip_and_files(tmp_path):
     assert {"method", "n_points", "n_failed", "time_s", "settings"} <= set(s)
     assert s["n_points"] == 16 and s["settings"]["n_d"] == 4
     csv = np.loadtxt(tmp_path / "points.csv", delimiter=",", skiprows=1)
-    assert csv.shape == (16, 8)
-    assert (tmp_path / "points.csv").read_text().splitlines()[0] == "x,y,z,u1,u2,stable,admissible,violations"
-    np.testing.assert_array_equal(csv[:, 5:], np.column_stack([np.ones(16), np.ones(16), np.zeros(16)]))
-    vtp = pv.read(tmp_path / "points.vtp")
-    assert vtp.n_points == 16 and "u2" in vtp.point_data
+    assert csv.shape == (16, 14)
+    assert (tmp_path / "points.csv").read_text().splitlines()[0] == \
+        "x,y,z,u1,u2,stable,admissible,violations,effort,steerability,compliance,tilt,state1,state2"
+    np.testing.assert_array_equal(csv[:, 5:8], np.column_stack([np.ones(16), np.ones(16), np.zeros(16)]))
+    vtu = pv.read(tmp_path / "points.vtu")
+    assert vtu.n_points == 16 and "u2" in vtu.point_data
     assert res.states.shape == (16, 3 * pb.mesh.n_nodes)
 
 
@@ -125,8 +126,8 @@ def test_cli_solve_writes_files_and_refuses_to_overwrite(tmp_path):
     r = subprocess.run(cmd, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert r.stdout == ""  # quiet, and no solver chatter
-    for f in ("summary.json", "points.csv", "result.npz", "points.vtp", "three_views.png", "workspace_3d.png",
-              "robot.vtu", "actuators.vtu"):
+    for f in ("summary.json", "points.csv", "result.npz", "points.vtu", "three_views.png", "workspace_3d.png",
+              "robot.vtu", "actuators.vtu", "report.html", "boundary.vtu", "boundary.stl"):
         assert (out / f).is_file(), f
     import meshio
 

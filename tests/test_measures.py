@@ -22,7 +22,8 @@ def test_cell_volume_of_a_ball_is_within_a_cell_layer_of_the_exact_one():
     m = measures(res, step=s, origin=np.zeros(3))
     exact = 4 / 3 * np.pi * r**3
     # the occupied cells cover the ball and lie within sqrt(3) s/2 of it
-    assert exact * 0.99 < m["volume"] < 4 / 3 * np.pi * (r + np.sqrt(3) * s / 2) ** 3
+    assert exact * 0.99 < m["cell_volume"] < 4 / 3 * np.pi * (r + np.sqrt(3) * s / 2) ** 3
+    assert m["volume_method"] == "cells" and m["volume"] == m["cell_volume"]  # no boundary surface here
     np.testing.assert_allclose(m["extents"], [[-r, -r, -r], [r, r, r]], atol=2e-4)
     # a task box half inside the ball: about half of its cells are reached
     t = measures(res, step=s, origin=np.zeros(3), task=Task(box=[[0.0, -0.004, -0.004], [0.04, 0.004, 0.004]]))

@@ -9,14 +9,16 @@ __all__ = ["write_outputs"]
 
 
 def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
-    """Result files plus the three-view and 3-D pictures into ``out``."""
+    """Result files plus the three-view and 3-D pictures and the interactive report into ``out``."""
     from .plots import three_views, workspace_3d
+    from .report import write_report
     from .scene import write_scene
 
     result.save(out)
     scene = write_scene(problem, out)
     three_views(result, out / "three_views.png", problem.mesh, title=f"{problem.name}: {result.method} workspace")
     workspace_3d(result, out / "workspace_3d.png", problem.mesh, title=f"{problem.name}: {result.method}")
+    write_report(result, out / "report.html", problem.mesh)
     for w in result.warnings():
         print(f"casadi-ws: warning: {w}", file=sys.stderr)
     if not quiet:
@@ -24,6 +26,10 @@ def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
         per_cell = s["counters"].get("factorizations_per_cell")
         print(f"{result.method}: {s['n_points']} reachable points, {s['n_failed']} failed, {s['time_s']:.1f} s"
               + (f", {per_cell:.2f} LU factorisations per reached cell" if per_cell is not None else ""))
-        extra = " cells.vtu" if (out / "cells.vtu").exists() else ""
-        print(f"wrote {out}/: summary.json points.csv failures.csv result.npz points.vtp{extra} "
-              f"{' '.join(scene)} (ParaView) three_views.png workspace_3d.png")
+        extra = "".join(f" {f}" for f in ("cells.vtu", "boundary.vtu", "boundary.stl") if (out / f).exists())
+        m = result.measures
+        if m.get("volume") is not None and m.get("volume_method") == "boundary":
+            print(f"volume {m['volume'] * 1e6:.4g} cm^3 (boundary surface, +-{m['volume_error'] * 1e6:.2g}); "
+                  f"the cells cover {m['cell_volume'] * 1e6:.4g} cm^3")
+        print(f"wrote {out}/: summary.json points.csv failures.csv result.npz points.vtu{extra} "
+              f"{' '.join(scene)} (ParaView) three_views.png workspace_3d.png report.html")

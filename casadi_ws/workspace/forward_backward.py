@@ -40,7 +40,9 @@ from ..solvers.equilibrium import CONVERGED, solve_equilibrium, tangent_factoriz
 from ..solvers.sensitivity import bounded_step, closest_to_box, curvature, sensitivity
 from ..status import Status
 from .backward import BackwardSettings, backward
+from .boundary import BoundarySettings, boundary
 from .interval import Grid, interval_box, neighbourhood
+from .maps import point_maps, stack
 from .result import WorkspaceResult, describe
 
 __all__ = ["Exploration", "FBSettings", "algorithm1", "forward_backward"]
@@ -82,6 +84,9 @@ class FBSettings:
     are claimed before any solve, so the result does not depend on this number."""
     progress: bool = True
     """Print one line per iteration on stderr."""
+    boundary: BoundarySettings = field(default_factory=BoundarySettings)
+    """The workspace's boundary surface, built after the exploration (:mod:`.boundary`); its enclosed volume
+    is the result's ``measures.volume``."""
 
 
 @dataclass
@@ -96,6 +101,7 @@ class _Config:
     S: np.ndarray | None  # K^-1 H^T: the first Gauss-Newton step of its backward solves
     Q: np.ndarray | None = None  # d2q/du2: that step's second-order predictor (reduced backward only)
     violations: int = 0  # admissibility violations (bit mask), non-zero only when they are kept
+    maps: dict | None = None  # effort, steerability, compliance, tilt, ... (:mod:`.maps`)
 
 
 def algorithm1(ex: Exploration, executor: Executor, ctrl_c) -> None:
@@ -128,7 +134,7 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings):
     sens = (A, S) if Q is None else (A, S, Q)
     for target in targets:
         res = backward(model, target, q, u, None, scale, bsettings, sens=sens)
-        A_new = S_new = Q_new = None
+        A_new = S_new = Q_new = maps = None
         n_fac = res.factorizations
         violations = 0
         if res.ok:
@@ -138,8 +144,9 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings):
                 n_fac += 1
             violations = admissibility(model, res.q, res.u, fac).mask
             A_new, S_new, Q_new = _derivatives(model, res.q, res.u, fac, scale, bsettings.formulation)
+            maps = point_maps(model, res.q, res.u, A_new, fac)
         out.append((res.q, res.u, res.tip, res.status, res.ok, A_new, S_new, Q_new, res.equilibrium_solves,
-                    n_fac, violations))
+                    n_fac, violations, maps))
     return out
 
 
@@ -177,7 +184,7 @@ class Exploration:
         self.reached_cells = {start.cell}
         self.visited = {start.cell}
         self.visited_pts = [start.p]
-        self.failed_targets, self.failed_status = [], []
+        self.failed_targets, self.failed_status, self.failed_closest = [], [], []
         self.excluded = []  # (tip, u, violation mask) of the verified answers that are not admissible
         self.frontier = [start]
 
@@ -262,7 +269,7 @@ class Exploration:
         keep_inadmissible = self.problem.admissibility.keep
         for (cfg, todo), out in zip(tasks, answers):
             eta = self.eta(cfg)
-            for (cell, target), (q, u, tip, status, ok, A, S, Q, n_eq, n_fac, viol) in zip(todo, out):
+            for (cell, target), (q, u, tip, status, ok, A, S, Q, n_eq, n_fac, viol, maps) in zip(todo, out):
                 self.counters["backward_solves"] += 1
                 self.counters["equilibrium_solves"] += n_eq
                 self.counters["factorizations"] += n_fac
@@ -270,12 +277,12 @@ class Exploration:
                     # verified but not a state the robot can take: kept apart, never a reached cell; its
                     # neighbours are still explored from the configurations that are admissible
                     self._exclude(tip, u, viol)
-                    self._fail(target, Status.INADMISSIBLE)
+                    self._fail(target, Status.INADMISSIBLE, tip)
                     continue
                 on_target = ok and np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9))
                 hit = on_target
                 if not hit:
-                    self._fail(target, Status(status) if not ok else Status.NOT_REACHED)
+                    self._fail(target, Status(status) if not ok else Status.NOT_REACHED, tip if ok else None)
                     if ok and self.uniform:
                         cell = self.grid.index(tip)
                         hit = self.grid.contains(cell, tip)
@@ -285,7 +292,7 @@ class Exploration:
                         self.counters["explored"] += 1
                     if not on_target:
                         self.counters["adopted"] += 1
-                    new = _Config(cell, tip, q, u, A, S, Q, viol)
+                    new = _Config(cell, tip, q, u, A, S, Q, viol, maps)
                     new_frontier.append(new)
                     self.reached.append(new)
                     self.reached_cells.add(cell)
@@ -297,12 +304,15 @@ class Exploration:
         for name in decode(violations):
             self.counters["excluded"][name] += 1
 
-    def _fail(self, target, status: Status) -> None:
+    def _fail(self, target, status: Status, closest=None) -> None:
+        """A target not reached; ``closest``: the verified answer's tip (the closest point the backward
+        solve found), if it had one."""
         key = {Status.PREFILTERED: "prefiltered", Status.NOT_REACHED: "not_reached",
                Status.INADMISSIBLE: "inadmissible"}.get(status, "backward_failed")
         self.counters[key] += 1
         self.failed_targets.append(target)
         self.failed_status.append(int(status))
+        self.failed_closest.append(np.full(3, np.nan) if closest is None else np.asarray(closest, float))
 
     def end_iteration(self) -> None:
         if not self.settings.store_states:
@@ -332,6 +342,8 @@ class Exploration:
                       visited_pts=np.array(self.visited_pts).reshape(-1, 3),
                       failed_targets=np.array(self.failed_targets).reshape(-1, 3),
                       failed_status=np.array(self.failed_status, dtype=int),
+                      failed_closest=np.array(self.failed_closest).reshape(-1, 3),
+                      **{f"map_{k}": v for k, v in stack([c.maps for c in reached], m.n_u).items()},
                       violations=np.array([c.violations for c in reached], dtype=np.int64),
                       excluded_p=np.array([e[0] for e in self.excluded]).reshape(-1, 3),
                       excluded_u=np.array([e[1] for e in self.excluded]).reshape(-1, m.n_u),
@@ -361,6 +373,9 @@ class Exploration:
         self.visited = {tuple(int(c) for c in v) for v in a["visited"]}
         self.visited_pts = list(a["visited_pts"])
         self.failed_targets, self.failed_status = list(a["failed_targets"]), list(a["failed_status"])
+        self.failed_closest = list(a["failed_closest"])
+        for i, c in enumerate(self.reached):
+            c.maps = {k[4:]: a[k][i] for k in a if k.startswith("map_")}
         self.excluded = list(zip(a["excluded_p"], a["excluded_u"], (int(v) for v in a["excluded_violations"])))
 
     def result(self, build_model: float) -> WorkspaceResult:
@@ -370,16 +385,19 @@ class Exploration:
         timings = {"build_model": build_model, **self.timings, "total": self.run.elapsed(),
                    "before_resume": self.run.previous}
         reached, settings = self.reached, self.settings
-        failed_targets, failed_status = self.failed_targets, self.failed_status
+        failed_targets, failed_status, closest = self.failed_targets, self.failed_status, self.failed_closest
         if self.uniform:  # a target missed by one solve whose cell another answer landed in is reached
             keep = [self.grid.index(tg) not in self.reached_cells for tg in failed_targets]
             failed_targets = [tg for tg, k in zip(failed_targets, keep) if k]
             failed_status = [s for s, k in zip(failed_status, keep) if k]
+            closest = [c for c, k in zip(closest, keep) if k]
         arrays = {"cell_step": np.array(settings.step if self.uniform else np.nan)}
         if self.uniform:
             arrays["cells"] = np.array([c.cell for c in reached], dtype=np.int64)
             arrays["cells_centres"] = np.array([self.grid.centre(c.cell) for c in reached])
             arrays["grid_origin"] = self.grid.origin
+        arrays["failed_closest"] = np.array(closest).reshape(-1, 3)
+        arrays.update({f"map_{k}": v for k, v in stack([c.maps for c in reached], self.model.n_u).items()})
         arrays.update(excluded_points=np.array([e[0] for e in self.excluded]).reshape(-1, 3),
                       excluded_u=np.array([e[1] for e in self.excluded]).reshape(-1, self.model.n_u),
                       excluded_violations=np.array([e[2] for e in self.excluded], dtype=np.int64))
@@ -411,10 +429,11 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
         model = model or StaticModel(problem)
         build_model = time.perf_counter() - t0
         # the budget is not part of the answer: a run stopped by it resumes with a larger one
-        # checkpoint format 2: frontiers carry Q; a format-1 checkpoint would resume without it and so end
+        # checkpoint format 4: reached points carry their maps, failures their closest points (2: frontiers
+        # carry Q); an older checkpoint would resume without them and so end
         # with another result than an uninterrupted run
         fp = fingerprint("forward-backward", model, asdict(settings) | {"workers": None, "progress": None,
-                                                                         "max_cells": None, "format": 3})
+                                                                         "max_cells": None, "format": 4})
         run = RunState(checkpoint_dir, "forward-backward", fp, resume, t0)
 
         own = executor is None
@@ -429,10 +448,10 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
                 raise RuntimeError(f"the equilibrium at u = u_min is not admissible "
                                    f"({', '.join(start_check.violations)}); cannot start")
             grid = Grid(eq.tip, settings.step) if settings.strategy == "uniform" else None
-            A0, S0, Q0 = _derivatives(model, eq.q, eq.u, tangent_factorization(model, eq.q, eq.u), settings.step,
-                                      settings.backward.formulation)
+            fac0 = tangent_factorization(model, eq.q, eq.u)
+            A0, S0, Q0 = _derivatives(model, eq.q, eq.u, fac0, settings.step, settings.backward.formulation)
             start = _Config(grid.index(eq.tip) if grid else (0, 0, 0), eq.tip, eq.q, eq.u.copy(), A0, S0, Q0,
-                            start_check.mask)
+                            start_check.mask, point_maps(model, eq.q, eq.u, A0, fac0))
             ex = Exploration(problem, model, settings, run, start, grid)
             ex.counters["equilibrium_solves"] += 1
             ex.counters["factorizations"] += 1
@@ -440,6 +459,12 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
                 ex.restore(*run.saved)
             with deferred_interrupt() as ctrl_c:  # Ctrl-C stops between solves; the last checkpoint stays
                 algorithm1(ex, executor, ctrl_c)
+            surface = None
+            if settings.boundary.enabled and not ex.frontier:
+                t = time.perf_counter()
+                surface = boundary(model, settings.boundary, executor=executor, problem=problem)
+                surface.check_points(np.array([c.p for c in ex.reached]))
+                ex.timings["boundary"] = time.perf_counter() - t
         finally:
             if own:
                 executor.close()
@@ -448,6 +473,7 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
 
             release_solvers()
         result = ex.result(build_model)
+        result.boundary = surface
         if not result.counters["stopped_at_max_cells"]:
             run.finish()  # complete: the result files replace the checkpoint, which a budget stop keeps
         return result

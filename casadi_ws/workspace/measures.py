@@ -4,8 +4,14 @@ Conventions (all on a uniform grid of step s; a forward-backward result uses its
 reports, any other result the cells its points occupy on a grid of step s through its first point, or
 through ``origin``):
 
-``cells``, ``volume``   number of cells, and cells x s^3 (m^3). For a robot with two actuators the workspace
-                        is a surface and this is its area times about one cell of thickness.
+``volume``              the volume enclosed by the boundary surface (:mod:`casadi_ws.workspace.boundary`),
+                        m^3, with ``volume_error`` (its difference from the surface through every other
+                        node) and ``volume_method`` (``boundary``); where there is no closed surface (2
+                        inputs: 0, the workspace is a surface; 6+ inputs, or faces that do not close), the
+                        cells' volume, ``volume_method: cells``, which overestimates by a layer of boundary
+                        cells (first order in s: ~2.5x on the 3-cable trunk at 4 mm).
+``cells``, ``cell_volume``  number of cells, and cells x s^3 (m^3): what the cells cover, not the robot's
+                        volume.
 ``area``                two actuators only: the area of the surface u -> p(u), m^2, summed over the
                         triangles of a Delaunay triangulation of the points' inputs u (scaled to the unit
                         square), mapped to their tips; triangles spanning more than 3 cells (across a hole
@@ -101,12 +107,19 @@ def measures(result, step: float | None = None, task: Task | None = None, origin
     """The measures of the module's docstring, as plain data (SI units)."""
     origin, step = _grid(result, step, origin)
     cells = cell_set(result, origin, step) if result.n_points else set()
-    out = {"cells": len(cells), "cell_step": step, "volume": len(cells) * step**3,
+    out = {"cells": len(cells), "cell_step": step, "cell_volume": len(cells) * step**3,
+           "volume": len(cells) * step**3, "volume_error": None, "volume_method": "cells",
            "extents": ([result.points.min(0).tolist(), result.points.max(0).tolist()] if result.n_points else None)}
     u = np.asarray(result.u)
+    b = getattr(result, "boundary", None)
+    if b is not None and b.method == "input-faces":
+        out.update(volume=abs(b.volume), volume_error=b.volume_error, volume_method="boundary",
+                   boundary_area=b.area)
     if u.ndim == 2 and u.shape[1] == 2 and result.n_points:
         lo, hi = np.asarray(result.problem.get("u_min", u.min(0))), np.asarray(result.problem.get("u_max", u.max(0)))
         out["area"] = surface_area(result.points, u, lo, hi, 3 * step)
+        if b is not None and b.method == "input-patch":
+            out.update(area=b.area, volume=0.0, volume_error=0.0, volume_method="surface (2 inputs)")
     if task is not None:
         want = task.cells(origin, step)
         out["task"] = task.describe()

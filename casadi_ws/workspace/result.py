@@ -6,13 +6,21 @@ residual below tolerance and u inside U), their inputs, optionally their nodal s
 
 Files written by :meth:`WorkspaceResult.save` into a directory:
 
-``summary.json``  method, n_points, n_failed, time_s, settings, counters, timings, problem description
+``summary.json``  method, n_points, n_failed, time_s, settings, counters, timings, problem description,
+                  measures (volume from the boundary surface, cell_volume, area, ...), the boundary's summary
 ``points.csv``    one row per reachable point: x, y, z (m), u1..un (N), stable, admissible (0/1), violations
-                  (bit mask: ``summary.json``'s ``violation_bits``)
-``failures.csv``  one row per failed point: u1..un, status, residual
-``result.npz``    all arrays (points, u, failures, states if kept, cells for forward-backward)
-``points.vtp``    the points as VTK PolyData with u as point data: opens in ParaView
-``cells.vtu``     forward-backward only: the reached grid cells as VTK voxels
+                  (bit mask: ``summary.json``'s ``violation_bits``), then the maps (:mod:`.maps`): effort,
+                  steerability, compliance, tilt, and each actuator's state state1..n
+``failures.csv``  one row per failed point. Forward: u1..un, status, reason, residual. Forward-backward:
+                  target_x, target_y, target_z (m), status, reason, closest_x, closest_y, closest_z (the tip
+                  of the verified answer the backward solve returned, empty if it had none)
+``result.npz``    all arrays (points, u, failures, states if kept, cells for forward-backward, maps,
+                  boundary_vertices / _triangles / _u)
+``points.vtu``    the points as VTK vertices with u, flags and maps as point data
+``cells.vtu``     forward-backward only: the reached grid cells as hexahedra, with the maps as cell data
+``boundary.vtu``  the boundary surface (:mod:`.boundary`) as triangles (2 inputs: the workspace surface and
+``boundary.stl``  its boundary curve as lines); STL for CAD. Every mesh file is VTK XML unstructured grid,
+                  which both ParaView and meshio read (meshio does not read PolyData, .vtp)
 """
 
 from __future__ import annotations
@@ -24,6 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from ..solvers.admissible import VIOLATIONS
+from ..status import Status
+from .maps import MAPS
 
 __all__ = ["FAILURE_WARNING", "WorkspaceResult", "describe", "load_result"]
 
@@ -64,6 +74,8 @@ class WorkspaceResult:
     """Further method-specific arrays (e.g. the forward-backward cells), saved in result.npz."""
     measures: dict = field(default_factory=dict)
     """Volume, area, extents, task share (:func:`casadi_ws.workspace.measures.measures`), if computed."""
+    boundary: object = None
+    """The boundary surface (:class:`casadi_ws.workspace.boundary.Boundary`), if built."""
 
     @property
     def n_points(self) -> int:
@@ -124,6 +136,7 @@ class WorkspaceResult:
             "bounding_box": ([self.points.min(0).tolist(), self.points.max(0).tolist()]
                              if self.n_points else None),
             "measures": self.measures,
+            "boundary": self.boundary.summary() if self.boundary is not None else None,
             "units": {"points": "m", "u": "/".join(dict.fromkeys(a.get("unit", "N") for a in
                                                                   self.problem.get("actuators", []))) or "N",
                       "time_s": "s", "volume": "m^3", "area": "m^2"},
@@ -134,54 +147,108 @@ class WorkspaceResult:
         d.mkdir(parents=True, exist_ok=True)
         (d / "summary.json").write_text(json.dumps(self.summary(), indent=2, default=_json_default) + "\n")
         self._save_points_csv(d / "points.csv")
-        nf = self.failed_u.shape[1] if self.failed_u.ndim == 2 else 0
-        fh = ",".join([f"u{i + 1}" for i in range(nf)] + ["status", "residual"])
-        np.savetxt(d / "failures.csv", np.hstack([self.failed_u.reshape(self.n_failed, nf),
-                                                  self.failed_status[:, None], self.failed_residual[:, None]]),
-                   delimiter=",", header=fh, comments="", fmt="%.10g")
+        self._save_failures_csv(d / "failures.csv")
         arrays = dict(points=self.points, u=self.u, failed_u=self.failed_u, failed_status=self.failed_status,
                       failed_residual=self.failed_residual, rest_tip=self.rest_tip,
                       **{f"extra_{k}": v for k, v in self.arrays.items()})
         if self.states is not None:
             arrays["states"] = self.states
         arrays.update(stable=self.stable, admissible=self.admissible, violations=self._violations())
+        b = self.boundary
+        if b is not None:
+            arrays.update(boundary_vertices=b.vertices, boundary_triangles=b.triangles, boundary_u=b.u,
+                          boundary_curve=np.zeros(0, int) if b.curve is None else b.curve)
         np.savez_compressed(d / "result.npz", **arrays)
-        self._save_vtp(d / "points.vtp")
+        self._save_points(d / "points.vtu")
         if "cells_centres" in self.arrays and len(self.arrays["cells_centres"]):
             self._save_cells(d / "cells.vtu")
+        if b is not None and len(b.triangles):
+            self._save_boundary(d)
         return d
+
+    def maps(self) -> dict:
+        """The point maps (:mod:`casadi_ws.workspace.maps`) as arrays, NaN where not computed."""
+        k, n_u = self.n_points, (self.u.shape[1] if self.u.ndim == 2 else 0)
+        out = {name: np.asarray(self.arrays.get(f"map_{name}", np.full(k, np.nan)), float) for name in MAPS}
+        out["states"] = np.asarray(self.arrays.get("map_states", np.full((k, n_u), np.nan)), float).reshape(k, n_u)
+        return out
+
+    def _save_failures_csv(self, path: Path) -> None:
+        reason = [Status(int(c)).label if int(c) in Status._value2member_map_ else str(int(c))
+                  for c in self.failed_status]
+        k = self.n_failed
+        if self.method == "forward-backward":
+            closest = np.asarray(self.arrays.get("failed_closest", np.full((k, 3), np.nan))).reshape(k, 3)
+            head = "target_x,target_y,target_z,status,reason,closest_x,closest_y,closest_z"
+            rows = [",".join([*(f"{v:.10g}" for v in t), str(int(c)), r,
+                              *("" if not np.isfinite(v) else f"{v:.10g}" for v in cl)])
+                    for t, c, r, cl in zip(self.failed_u.reshape(k, 3), self.failed_status, reason, closest)]
+        else:
+            nf = self.failed_u.shape[1] if self.failed_u.ndim == 2 else 0
+            head = ",".join([f"u{i + 1}" for i in range(nf)] + ["status", "reason", "residual"])
+            rows = [",".join([*(f"{v:.10g}" for v in uu), str(int(c)), r, f"{res:.3g}"])
+                    for uu, c, r, res in zip(self.failed_u.reshape(k, nf), self.failed_status, reason,
+                                             self.failed_residual)]
+        path.write_text("\n".join([head, *rows]) + "\n")
+
+    def _point_data(self) -> dict:
+        data = {"stable": self.stable.astype(np.uint8), "admissible": self.admissible.astype(np.uint8)}
+        for i in range(self.u.shape[1] if self.u.ndim == 2 else 0):
+            data[f"u{i + 1}"] = self.u[:, i]
+        maps = self.maps()
+        for name in MAPS:
+            data[name] = maps[name]
+        for i in range(maps["states"].shape[1]):
+            data[f"state{i + 1}"] = maps["states"][:, i]
+        return data
 
     def _save_points_csv(self, path: Path) -> None:
         """x, y, z (m), u1..un, then stable, admissible (0/1) and the violations' bit mask (all numbers, so
-        any CSV reader takes the file; bit i is ``VIOLATIONS[i]``, listed in summary.json)."""
+        any CSV reader takes the file; bit i is ``VIOLATIONS[i]``, listed in summary.json), then the maps."""
         n_u = self.u.shape[1] if self.u.ndim == 2 else 0
-        head = ",".join(["x", "y", "z"] + [f"u{i + 1}" for i in range(n_u)] + ["stable", "admissible", "violations"])
+        maps = self.maps()
+        head = ",".join(["x", "y", "z"] + [f"u{i + 1}" for i in range(n_u)] + ["stable", "admissible", "violations"]
+                        + list(MAPS) + [f"state{i + 1}" for i in range(n_u)])
         data = np.hstack([self.points, self.u.reshape(self.n_points, n_u), self.stable[:, None],
-                          self.admissible[:, None], self._violations()[:, None]])
-        np.savetxt(path, data, delimiter=",", header=head, comments="", fmt=["%.10g"] * (3 + n_u) + ["%d"] * 3)
+                          self.admissible[:, None], self._violations()[:, None],
+                          np.column_stack([maps[name] for name in MAPS]), maps["states"]])
+        np.savetxt(path, data, delimiter=",", header=head, comments="",
+                   fmt=["%.10g"] * (3 + n_u) + ["%d"] * 3 + ["%.6g"] * (len(MAPS) + n_u))
 
     def _save_cells(self, path: Path) -> None:
-        """The reached cells as VTK voxels (forward-backward's W_E)."""
-        import pyvista as pv
+        """The reached cells (forward-backward's W_E) as hexahedra, the cell's point's maps as cell data."""
+        import meshio
 
         c = np.asarray(self.arrays["cells_centres"])
         h = 0.5 * float(self.arrays["cell_step"])
-        corners = np.array([[i, j, k] for k in (-1, 1) for j in (-1, 1) for i in (-1, 1)], float) * h
+        # VTK hexahedron order: the bottom face counter-clockwise, then the top face
+        corners = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
+                            [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], float) * h
         pts = (c[:, None, :] + corners[None]).reshape(-1, 3)
-        conn = np.arange(len(pts)).reshape(-1, 8)
-        grid = pv.UnstructuredGrid({pv.CellType.VOXEL: conn}, pts)
-        grid.cell_data["u_norm"] = np.linalg.norm(self.u, axis=1) if self.u.size else np.zeros(len(c))
-        grid.save(str(path))
+        data = {k: [np.asarray(v, float)] for k, v in self._point_data().items()} if len(c) == self.n_points \
+            else {}
+        meshio.write(path, meshio.Mesh(pts, [("hexahedron", np.arange(len(pts)).reshape(-1, 8))], cell_data=data))
 
-    def _save_vtp(self, path: Path) -> None:
-        import pyvista as pv
+    def _save_points(self, path: Path) -> None:
+        import meshio
 
-        cloud = pv.PolyData(self.points if self.n_points else np.zeros((0, 3)))
-        cloud.point_data["stable"] = self.stable.astype(np.uint8)
-        cloud.point_data["admissible"] = self.admissible.astype(np.uint8)
-        for i in range(self.u.shape[1] if self.u.ndim == 2 else 0):
-            cloud.point_data[f"u{i + 1}"] = self.u[:, i]
-        cloud.save(str(path))
+        pts = self.points if self.n_points else np.zeros((0, 3))
+        meshio.write(path, meshio.Mesh(pts, [("vertex", np.arange(len(pts))[:, None])],
+                                       point_data={k: np.asarray(v, float) for k, v in self._point_data().items()}))
+
+    def _save_boundary(self, d: Path) -> None:
+        import meshio
+
+        b = self.boundary
+        cells = [("triangle", b.triangles)]
+        if b.curve is not None and len(b.curve):
+            ring = np.append(b.curve, b.curve[0])
+            cells.append(("line", np.column_stack([ring[:-1], ring[1:]])))
+        point_data = {f"u{i + 1}": b.u[:, i] for i in range(b.u.shape[1])}
+        if b.violations is not None:
+            point_data["admissible"] = (b.violations == 0).astype(float)
+        meshio.write(d / "boundary.vtu", meshio.Mesh(b.vertices, cells, point_data=point_data))
+        meshio.write(d / "boundary.stl", meshio.Mesh(b.vertices, [("triangle", b.triangles)]), binary=True)
 
 
 def _json_default(o):
@@ -205,7 +272,19 @@ def load_result(directory: str | Path) -> WorkspaceResult:
         counters=summary["counters"], timings=summary["timings"], settings=summary["settings"],
         problem=summary["problem"], rest_tip=a["rest_tip"],
         arrays={k[len("extra_"):]: v for k, v in a.items() if k.startswith("extra_")},
-        measures=summary.get("measures") or {})
+        measures=summary.get("measures") or {}, boundary=_load_boundary(summary.get("boundary"), a))
+
+
+def _load_boundary(info, a):
+    if not info or "boundary_vertices" not in a:
+        return None
+    from .boundary import Boundary
+
+    curve = a.get("boundary_curve")
+    return Boundary(a["boundary_vertices"], a["boundary_triangles"], a["boundary_u"], info["method"],
+                    closed=info["closed"], volume=info["volume"], volume_error=info["volume_error"],
+                    area=info["area"], tolerance=info["tolerance"], failed=info.get("failed_nodes", 0),
+                    curve=curve if curve is not None and len(curve) else None, notes=info.get("notes", []))
 
 
 def describe(problem, model) -> dict:

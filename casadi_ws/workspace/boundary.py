@@ -1,0 +1,476 @@
+"""The workspace's boundary surface, its enclosed volume and its area: the image of the input box's faces.
+
+The reachable set is W = p(U), the image of the box U of inputs under the tip map p(u). Where the map is a
+submersion inside U (its Jacobian A = dp/du has rank 3), an interior input maps to an interior point, so
+the boundary of W lies in the image of the boundary of U, and (its fibres leaving U) W is the union of the
+images of U's 3-dimensional faces. Hence:
+
+* **3 inputs.** If det A keeps one sign over U (checked at every forward-backward point, where A is known)
+  and p is one-to-one, the boundary of W is exactly p(dU): the six faces of the box, each sampled on an
+  n x n grid of verified equilibria and triangulated. That is a closed surface by construction (faces share
+  their edge nodes), oriented outwards by the sign of det A, and its enclosed volume (divergence theorem)
+  equals the Jacobian integral  V = int_U |det A| du  up to the triangulation's chord error, O(h^2).
+* **4 or 5 inputs.** Every 2-face of U (two inputs free, the others at a bound) is sampled; a face is kept
+  when its triangles lie outside the images of the 3-faces it does not belong to (tested with the closed
+  surfaces of those images); the kept faces, oriented by the 3-face they bound, must close (every edge
+  shared by exactly two triangles, each way once), which is checked, never assumed. On the 4-cable trunk
+  the kept faces are the 8 of 24 where one cable of each antagonistic pair is free.
+* **2 inputs.** W is a surface patch: p over U on an n x n grid, with its boundary curve p(dU). It has an
+  area and no volume.
+* **6 or more inputs**, or a surface that does not close: no surface (C(n,2) 2^(n-2) faces); the volume
+  falls back to the cells' (``method: cells``) and the summary says so.
+
+Why not a Hermite-data contouring (e.g. dual contouring) of the forward-backward grid: the 3-cable trunk's
+workspace is a curved sheet ~2.5 mm thick, thinner than its 4 mm cells; a grid-based surface cannot
+resolve it, the input faces can (docs/methods.md, BENCHMARKS.md).
+
+Error estimate: the faces are sampled on n x n nodes (n odd); the same surface through every other node
+((n + 1) / 2) gives a second volume, and for a second-order method the finer one's error is about a third of
+their difference; ``volume_error`` reports the whole difference (conservative). ``tolerance`` bounds the
+distance from the true boundary to the triangles: half the coarse surface's largest chord error
+(:func:`_tolerance`); every verified point of the method is checked against it (``points_outside``).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..solvers.admissible import admissibility
+from ..solvers.equilibrium import CONVERGED, solve_equilibrium
+from ..solvers.sensitivity import sensitivity
+
+__all__ = ["Boundary", "BoundarySettings", "boundary", "boundary_of", "distance_outside", "two_faces"]
+
+MAX_INPUTS = 5
+"""Above this many inputs the number of faces, C(n,2) 2^(n-2), makes the surface too costly."""
+
+
+@dataclass
+class BoundarySettings:
+    """How the boundary surface is built."""
+
+    n: int = 5
+    """Nodes per edge of each face of U (odd, >= 3): (n - 1)^2 quadrilaterals, two triangles each. 5 puts
+    the 3-cable trunk's volume 0.2 % from its Jacobian integral (BENCHMARKS.md)."""
+    enabled: bool = True
+    """Build the surface with every forward-backward result (``--no-boundary`` turns it off)."""
+
+
+@dataclass
+class Boundary:
+    """A triangulated boundary of the workspace (or, for 2 inputs, the workspace surface itself)."""
+
+    vertices: np.ndarray
+    """(k, 3) tip positions, m."""
+    triangles: np.ndarray
+    """(t, 3) vertex indices, counter-clockwise seen from outside (closed surfaces)."""
+    u: np.ndarray
+    """(k, n_u) the inputs of the vertices."""
+    method: str
+    """``input-faces`` (a closed surface), ``input-patch`` (2 inputs: the surface W) or ``none``."""
+    closed: bool = False
+    """Every edge is shared by exactly two triangles, traversed once each way."""
+    volume: float | None = None
+    """Enclosed volume, m^3 (closed surfaces)."""
+    volume_error: float | None = None
+    """|volume - the volume through every other node|, m^3."""
+    area: float = 0.0
+    """Surface area, m^2."""
+    tolerance: float = 0.0
+    """Estimated largest distance between the triangles and the true boundary, m."""
+    curve: np.ndarray | None = None
+    """2 inputs: the boundary curve p(dU) as a closed polyline of vertex indices."""
+    violations: np.ndarray | None = None
+    """Admissibility bit mask of each vertex (:mod:`casadi_ws.solvers.admissible`)."""
+    failed: int = 0
+    """Face nodes whose equilibrium could not be verified (then there is no surface)."""
+    notes: list = field(default_factory=list)
+    """Plain-language caveats (non-closed surface, inadmissible vertices, sign changes of det A)."""
+    checks: dict = field(default_factory=dict)
+    """Results of checking the surface against the method's points (``points_outside``, ``max_outside``)."""
+
+    def check_points(self, points) -> dict:
+        """How many of ``points`` lie outside the closed surface by more than its tolerance (every verified
+        point lies in W, so any is a defect of the surface); stored in :attr:`checks`."""
+        if self.method != "input-faces" or not len(points):
+            return {}
+        d = distance_outside(self, points)
+        self.checks = {"points_checked": int(len(points)),
+                       "points_outside": int(np.count_nonzero(d > self.tolerance)),
+                       "max_outside": float(max(d.max(), 0.0))}
+        if self.checks["points_outside"]:
+            self.notes.append(f"{self.checks['points_outside']} of {len(points)} verified points lie outside the "
+                              f"surface by more than its tolerance {self.tolerance * 1e3:.3g} mm (at most "
+                              f"{self.checks['max_outside'] * 1e3:.3g} mm)")
+        return self.checks
+
+    def summary(self) -> dict:
+        return {**self.checks, "method": self.method, "closed": self.closed, "volume": self.volume,
+                "volume_error": self.volume_error, "area": self.area, "tolerance": self.tolerance,
+                "vertices": int(len(self.vertices)), "triangles": int(len(self.triangles)),
+                "inadmissible_vertices": int(np.count_nonzero(self.violations)) if self.violations is not None
+                else 0, "failed_nodes": self.failed, "notes": list(self.notes)}
+
+
+def distance_outside(b: Boundary, points) -> np.ndarray:
+    """Signed distance of each point to a closed, outward-oriented surface (> 0 outside), m."""
+    import pyvista as pv
+
+    surf = pv.PolyData(b.vertices, np.hstack([np.full((len(b.triangles), 1), 3), b.triangles]).ravel())
+    out = pv.PolyData(np.asarray(points, float)).compute_implicit_distance(surf)
+    return np.asarray(out.point_data["implicit_distance"], float)
+
+
+def two_faces(n_u: int):
+    """The 2-faces of the box of n_u inputs: (i, j, fixed), ``fixed`` mapping every other input to 0 (its
+    lower bound) or 1 (upper)."""
+    out = []
+    for i, j in itertools.combinations(range(n_u), 2):
+        others = [k for k in range(n_u) if k not in (i, j)]
+        for side in itertools.product((0, 1), repeat=len(others)):
+            out.append((i, j, dict(zip(others, side))))
+    return out
+
+
+def _face_nodes(face, n: int, n_u: int) -> np.ndarray:
+    """(n, n, n_u) unit-box coordinates of a face's nodes; axis 0 runs along input i, axis 1 along j."""
+    i, j, fixed = face
+    s = np.linspace(0.0, 1.0, n)
+    g = np.zeros((n, n, n_u))
+    for k, v in fixed.items():
+        g[..., k] = v
+    g[..., i], g[..., j] = s[:, None], s[None, :]
+    return g
+
+
+def _key(s):
+    return tuple(np.rint(np.asarray(s) * 720720).astype(np.int64).tolist())  # exact for n - 1 | 720720
+
+
+def _solve_nodes(model, us: np.ndarray, want_A: bool):
+    """Equilibria at ``us`` (in continuation order): tips, status, violations, A (3 x n_u each, if asked).
+    Each start is the nearest solved node's state plus its tangent step S du, so one Newton step with a
+    fresh LU usually finishes it."""
+    tips = np.full((len(us), 3), np.nan)
+    status = np.zeros(len(us), dtype=int)
+    viol = np.zeros(len(us), dtype=np.int64)
+    As = np.full((len(us), 3, model.n_u), np.nan)
+    done = []  # (u, q, S)
+    span = np.where(model.u_max > model.u_min, model.u_max - model.u_min, 1.0)
+    for k, u in enumerate(us):
+        guess = q0 = u0 = None
+        if done:
+            near = min(done, key=lambda d: np.abs((d[0] - u) / span).max())
+            u0, q0, S = near
+            guess = q0 + model.full(S @ (u - u0))
+        eq = solve_equilibrium(model, u, q0=q0, u0=u0, guess=guess)
+        status[k] = eq.status
+        if eq.status != CONVERGED:
+            continue
+        tips[k] = eq.tip
+        fac = eq.factorization
+        if fac is None:
+            from ..solvers.equilibrium import tangent_factorization
+
+            fac = tangent_factorization(model, eq.q, eq.u)
+        A, S = sensitivity(model, eq.q, fac)
+        As[k] = A
+        viol[k] = admissibility(model, eq.q, eq.u, fac).mask
+        done.append((u.copy(), eq.q, S))
+    return tips, status, viol, (As if want_A else None)
+
+
+def _solve_job(model, us, want_A):
+    return _solve_nodes(model, us, want_A)
+
+
+def _order(nodes: list, n_u: int) -> list:
+    """Continuation order: greedy nearest neighbour from the lower corner (all inputs at their minimum)."""
+    P = np.array(nodes, dtype=float)
+    left = list(range(len(P)))
+    cur = int(np.argmin(P.sum(1)))
+    out = [cur]
+    left.remove(cur)
+    while left:
+        d = np.abs(P[left] - P[cur]).sum(1)
+        cur = left[int(np.argmin(d))]
+        out.append(cur)
+        left.remove(cur)
+    return out
+
+
+def _triangles(n: int, sub: int = 1) -> np.ndarray:
+    """Triangles of an n x n node grid (index r * n + c), every ``sub``-th node, counter-clockwise in (r, c)."""
+    idx = np.arange(n * n).reshape(n, n)[::sub, ::sub]
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    return np.vstack([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+
+
+def _signed_volume(V, T) -> float:
+    return float(np.einsum("ij,ij->i", V[T[:, 0]], np.cross(V[T[:, 1]], V[T[:, 2]])).sum() / 6.0)
+
+
+def _area(V, T) -> float:
+    return float(0.5 * np.linalg.norm(np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]]), axis=1).sum())
+
+
+def _closed(T) -> bool:
+    """Every directed edge once, and its reverse once: a closed, consistently oriented surface."""
+    e = np.vstack([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
+    directed = {tuple(x) for x in e.tolist()}
+    return len(directed) == len(e) and all((b, a) in directed for a, b in directed)
+
+
+def _outward(face, three_face) -> int:
+    """+1 if the face's (i, j) parametrisation points out of the 3-face ``(free inputs a < b < c, fixed)``."""
+    i, j, fixed = face
+    free = three_face[0]
+    k = next(x for x in free if x not in (i, j))
+    order = [free.index(i), free.index(j), free.index(k)]
+    cyclic = order in ([0, 1, 2], [1, 2, 0], [2, 0, 1])
+    return (1 if cyclic else -1) * (1 if fixed[k] == 1 else -1)
+
+
+def _three_faces(faces):
+    """The 3-faces (free triple, fixed) and, for each, its six 2-faces' indices."""
+    index = {(f[0], f[1], tuple(sorted(f[2].items()))): m for m, f in enumerate(faces)}
+    out = []
+    n_u = len(faces[0][2]) + 2
+    for free in itertools.combinations(range(n_u), 3):
+        others = [k for k in range(n_u) if k not in free]
+        for side in itertools.product((0, 1), repeat=len(others)):
+            fixed = dict(zip(others, side))
+            members = []
+            for a, b in itertools.combinations(free, 2):
+                c = next(x for x in free if x not in (a, b))
+                for v in (0, 1):
+                    members.append(index[(a, b, tuple(sorted({**fixed, c: v}.items())))])
+            out.append((list(free), fixed, members))
+    return out
+
+
+def boundary(model, settings: BoundarySettings | None = None, executor=None, problem=None,
+             known: tuple | None = None) -> Boundary:
+    """The boundary of the workspace p(U) (see the module's docstring).
+
+    ``executor`` (with ``problem``) solves the face nodes in parallel; ``known`` = (u, tips) of verified
+    equilibria to take instead of solving (e.g. a forward grid whose nodes include the faces' nodes).
+    """
+    settings = settings or BoundarySettings()
+    n = int(settings.n)
+    if n < 3 or n % 2 == 0:
+        raise ValueError(f"boundary: n must be odd and >= 3, got {n}")
+    n_u = model.n_u
+    span = model.u_max - model.u_min
+    if n_u < 2 or n_u > MAX_INPUTS or np.any(span <= 0):
+        why = (f"{n_u} inputs, C(n,2) 2^(n-2) = {len(two_faces(n_u)) if n_u <= 12 else 'too many'} faces"
+               if n_u > MAX_INPUTS else "fewer than two inputs with a range")
+        return Boundary(np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros((0, n_u)), "none",
+                        notes=[f"no boundary surface ({why}); the volume is the cells'"])
+    nodes = _Nodes(model, executor, problem, known)
+    if n_u == 2:
+        out = nodes.solve([(0, 1, {})], n)
+        return out if isinstance(out, Boundary) else _patch(*out, n)
+    faces = two_faces(n_u)
+    # 4 or more inputs: which faces bound the workspace, and their orientation, from a 3 x 3 sampling
+    screen = nodes.solve(faces, n if n_u == 3 else 3)
+    if isinstance(screen, Boundary):
+        return screen
+    keep, flip, notes = _orient(*screen, faces)
+    if n_u > 3:
+        notes.append(f"{len(keep)} of {len(faces)} faces of U bound the workspace")
+    if not keep:
+        return Boundary(screen[0], np.zeros((0, 3), int), screen[1], "none", violations=screen[2],
+                        notes=notes + ["no face of U lies on the workspace's boundary"])
+    out = nodes.solve([faces[m] for m in keep], n) if n_u > 3 else screen
+    if isinstance(out, Boundary):
+        return out
+    V, U, vmask, face_tris = out
+    if n_u == 3:
+        face_tris = [[face_tris[sub][m] for m in keep] for sub in (0, 1)]
+    tol = max(_tolerance(V, _face_grid(T)) for T in face_tris[0])
+    b = _closed_surface(V, U, [[T[:, ::-1] if f else T for T, f in zip(face_tris[sub], [flip[m] for m in keep])]
+                               for sub in (0, 1)], vmask, notes, tol)
+    if np.any(b.violations):
+        b.notes.append(f"{np.count_nonzero(b.violations)} of {len(b.violations)} surface vertices are not "
+                       f"admissible equilibria: the surface bounds the image of U, which is larger than the "
+                       f"admissible workspace there")
+    return b
+
+
+class _Nodes:
+    """The face nodes' equilibria, each solved once (in parallel over the executor's workers)."""
+
+    def __init__(self, model, executor, problem, known):
+        self.model, self.executor, self.problem = model, executor, problem
+        self.lo, self.span = model.u_min, model.u_max - model.u_min
+        self.tip, self.viol = {}, {}
+        if known is not None:
+            for u, p in zip(np.asarray(known[0]), np.asarray(known[1])):
+                if np.all(np.isfinite(p)):
+                    self.tip[_key((u - self.lo) / self.span)] = np.asarray(p, float)
+                    self.viol[_key((u - self.lo) / self.span)] = 0
+
+    def solve(self, faces, n):
+        """(V, U, violations, face triangles [fine, every other node]) over ``faces``' n x n nodes, or a
+        :class:`Boundary` saying that some did not converge."""
+        n_u = self.model.n_u
+        grids = [_face_nodes(f, n, n_u).reshape(-1, n_u) for f in faces]
+        keys = {}
+        for g in grids:
+            for s in g:
+                keys.setdefault(_key(s), s)
+        todo = [k for k in keys if k not in self.tip]
+        if todo:
+            order = [todo[m] for m in _order([keys[k] for k in todo], n_u)]
+            workers = getattr(self.executor, "workers", 1) if self.executor is not None else 1
+            chunks = [c for c in np.array_split(np.arange(len(order)), workers) if len(c)]
+            jobs = [(self.lo + np.array([keys[order[m]] for m in c]) * self.span, False) for c in chunks]
+            if self.executor is None or len(jobs) == 1 and workers == 1:
+                answers = [_solve_nodes(self.model, *job) for job in jobs]
+            else:
+                answers = self.executor.map(_solve_job, self.problem, jobs)
+            for c, (tips, status, v, _) in zip(chunks, answers):
+                for m, t, st, vv in zip(c, tips, status, v):
+                    if st == CONVERGED:
+                        self.tip[order[m]], self.viol[order[m]] = t, vv
+        names = list(keys)
+        index = {k: m for m, k in enumerate(names)}
+        V = np.array([self.tip.get(k, np.full(3, np.nan)) for k in names])
+        U = self.lo + np.array([keys[k] for k in names]) * self.span
+        vmask = np.array([self.viol.get(k, 0) for k in names], dtype=np.int64)
+        failed = int(np.count_nonzero(~np.isfinite(V[:, 0])))
+        if failed:
+            return Boundary(V, np.zeros((0, 3), int), U, "none", violations=vmask, failed=failed,
+                            notes=[f"{failed} face nodes did not converge: no boundary surface; the volume is "
+                                   f"the cells'"])
+        ids = [np.array([index[_key(s)] for s in g]) for g in grids]
+        return V, U, vmask, [[i[_triangles(n, sub)] for i in ids] for sub in (1, 2)]
+
+
+def _patch(V, U, vmask, face_tris, n) -> Boundary:
+    """2 inputs: the surface W itself, with its boundary curve."""
+    T = face_tris[0][0]
+    ring = [(r, 0) for r in range(n)] + [(n - 1, c) for c in range(1, n)] + \
+           [(r, n - 1) for r in range(n - 2, -1, -1)] + [(0, c) for c in range(n - 2, 0, -1)]
+    grid_ids = _grid_ids(V, U, n)
+    curve = np.array([grid_ids[r, c] for r, c in ring])
+    a, a2 = _area(V, T), _area(V, face_tris[1][0])
+    return Boundary(V, T, U, "input-patch", closed=False, volume=0.0, volume_error=0.0, area=a,
+                    tolerance=_tolerance(V, grid_ids), curve=curve, violations=vmask,
+                    notes=[f"2 inputs: the workspace is a surface (area {a * 1e4:.3g} cm^2; "
+                           f"{abs(a - a2) * 1e4:.2g} cm^2 from the surface through every other node)"])
+
+
+def _grid_ids(V, U, n):
+    """The vertex ids of a 2-input patch as an (n, n) array."""
+    lo, hi = U.min(0), U.max(0)
+    rc = np.rint((U - lo) / np.where(hi > lo, hi - lo, 1) * (n - 1)).astype(int)
+    ids = np.zeros((n, n), dtype=int)
+    ids[rc[:, 0], rc[:, 1]] = np.arange(len(U))
+    return ids
+
+
+def _tolerance(V, ids) -> float:
+    """Half the largest distance between a node and the chord of its two neighbours two nodes away, along
+    the grid and along the triangles' diagonals: the coarse surface's chord error, of which a second-order
+    surface through all nodes keeps about a quarter (the factor 2 is margin: on the 3-cable trunk at 8 mm,
+    verified points lay up to 0.46 of it outside)."""
+    P = V[ids]
+    d = [np.linalg.norm(P[1:-1:2] - 0.5 * (P[:-2:2] + P[2::2]), axis=-1),
+         np.linalg.norm(P[:, 1:-1:2] - 0.5 * (P[:, :-2:2] + P[:, 2::2]), axis=-1),
+         np.linalg.norm(P[1:-1:2, 1:-1:2] - 0.5 * (P[:-2:2, :-2:2] + P[2::2, 2::2]), axis=-1)]
+    return 0.5 * float(max(x.max(initial=0.0) for x in d))
+
+
+def _orient(V, U, vmask, face_tris, faces):
+    """(kept faces, flip per face, notes): each 3-face's image is bounded by its six 2-faces oriented out of
+    the box and flipped where det A < 0 (the sign of the enclosed volume); a kept face is oriented out of an
+    image it bounds, the workspace lying on that image's side."""
+    images, signs = [], set()  # per 3-face: {face: flipped?}, the fine triangles outward
+    for free, fixed, members in _three_faces(faces):
+        flips = {m: _outward(faces[m], (free, fixed)) < 0 for m in members}
+        T = np.vstack([face_tris[0][m][:, ::-1] if f else face_tris[0][m] for m, f in flips.items()])
+        signs.add(_signed_volume(V, T) > 0)
+        if _signed_volume(V, T) < 0:
+            flips, T = {m: not f for m, f in flips.items()}, T[:, ::-1]
+        images.append((flips, T))
+    notes = []
+    if len(signs) > 1:
+        notes.append("det dp/du has different signs on different 3-faces of U: the surface may not be the "
+                     "boundary")
+    keep = list(range(len(faces))) if len(images) == 1 else _kept_faces(V, faces, face_tris, images)
+    flip = {}
+    for flips, _ in images:
+        for m, f in flips.items():
+            flip.setdefault(m, f)
+    return keep, flip, notes
+
+
+def _closed_surface(V, U, face_tris, vmask, notes, tol) -> Boundary:
+    Tf, Tc = np.vstack(face_tris[0]), np.vstack(face_tris[1])
+    used = np.unique(Tf)
+    remap = -np.ones(len(V), dtype=int)
+    remap[used] = np.arange(len(used))
+    V2, U2, Tf2, Tc2, vm = V[used], U[used], remap[Tf], remap[Tc], vmask[used]
+    if not (_closed(Tf2) and _closed(Tc2)):
+        return Boundary(V2, Tf2, U2, "none", closed=False, area=_area(V2, Tf2), violations=vm,
+                        notes=notes + ["the faces of U that bound the workspace do not close: no volume from "
+                                       "the surface; the volume is the cells'"])
+    vol, vol_c = _signed_volume(V2, Tf2), _signed_volume(V2, Tc2)
+    return Boundary(V2, Tf2, U2, "input-faces", closed=True, volume=vol, volume_error=abs(vol - vol_c),
+                    area=_area(V2, Tf2), tolerance=tol, violations=vm, notes=notes)
+
+
+def _face_grid(T):
+    """The (n, n) vertex ids of a face, from its triangles as :func:`_triangles` makes them."""
+    k = len(T) // 2
+    n = int(round(np.sqrt(k))) + 1
+    ids = np.zeros((n, n), dtype=int)
+    a, b, c, d = T[:k, 0], T[:k, 1], T[:k, 2], T[k:, 2]
+    r, cc = np.divmod(np.arange(k), n - 1)
+    ids[r, cc], ids[r + 1, cc], ids[r + 1, cc + 1], ids[r, cc + 1] = a, b, c, d
+    return ids
+
+
+def _kept_faces(V, faces, face_tris, images) -> list:
+    """The faces most of whose triangles' centroids lie outside the images of the 3-faces they do not
+    bound."""
+    import pyvista as pv
+
+    cents = [V[face_tris[0][m]].mean(axis=1) for m in range(len(faces))]
+    allc = pv.PolyData(np.vstack(cents))
+    owner = np.repeat(np.arange(len(faces)), [len(c) for c in cents])
+    inside_any = np.zeros(len(owner), dtype=bool)
+    for tris, T in images:
+        surf = pv.PolyData(V, np.hstack([np.full((len(T), 1), 3), T]).ravel())
+        sel = allc.select_interior_points(surf, check_surface=False)
+        ins = np.asarray(sel.point_data["SelectedPoints"] if "SelectedPoints" in sel.point_data
+                         else sel.point_data[sel.point_data.keys()[0]]).astype(bool)
+        inside_any |= ins & ~np.isin(owner, list(tris))
+    share_out = np.bincount(owner, weights=~inside_any, minlength=len(faces)) / np.bincount(owner)
+    return [m for m in range(len(faces)) if share_out[m] > 0.5]
+
+
+def boundary_of(result, problem, model=None, settings: BoundarySettings | None = None, executor=None) -> Boundary:
+    """The boundary of an existing result's workspace (the command ``casadi-ws boundary``).
+
+    A forward result's grid holds every face node when its n_d is odd (n = n_d, nothing to solve); other
+    nodes are solved on ``problem``'s model. The result's points are then checked against the surface.
+    """
+    from ..fem.model import StaticModel
+
+    settings = settings or BoundarySettings()
+    known = None
+    if result.method == "forward":
+        n_d = int(result.settings.get("n_d", 0))
+        if n_d >= 3 and n_d % 2 == 1 and settings.n == BoundarySettings.n:
+            settings = BoundarySettings(n=n_d, enabled=settings.enabled)
+        known = (result.u, result.points)
+    model = model or StaticModel(problem)
+    b = boundary(model, settings, executor=executor, problem=problem, known=known)
+    b.check_points(result.points)
+    return b

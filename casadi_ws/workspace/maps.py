@@ -1,0 +1,89 @@
+"""What each reported point is worth: maps over the workspace, from the LU and sensitivities a method holds.
+
+``effort``         RMS of the inputs, each as a fraction of its largest magnitude max(|u_min|, |u_max|):
+                   0 at rest, 1 with every actuator at its extreme.
+``steerability``   the smallest singular value of A = dp/du (m per input unit): how far the tip moves for
+                   the worst-steered unit change of the inputs there; 0 where a direction cannot be steered.
+``compliance``     the largest eigenvalue of the symmetric part of the tip compliance C K^-1 C^T (m/N): how
+                   far the tip moves per newton of external load in its softest direction (1 / the
+                   stiffness a task feels there). The full 3 x 3 matrix is kept in result.npz.
+``tilt``           the angle (degrees) between the robot's axis through the tip now and at rest; the axis
+                   is the direction from the fixed nodes' centroid to the rest tip, carried by the tip
+                   element's mean deformation gradient (``direction``: its unit vector now).
+``state1..n``      each actuator's quantity (a cable's length, m; a cavity's volume, m^3).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["MAPS", "effort", "point_maps"]
+
+MAPS = ("effort", "steerability", "compliance", "tilt")
+"""The scalar maps, in the column order of points.csv."""
+
+
+def effort(model, u) -> np.ndarray:
+    """(k,) the inputs' RMS fraction of their largest magnitude (see the module docstring)."""
+    scale = np.maximum(np.abs(model.u_min), np.abs(model.u_max))
+    scale = np.where(scale > 0, scale, 1.0)
+    u = np.atleast_2d(u)
+    if not u.shape[1]:
+        return np.zeros(len(u))
+    return np.sqrt(np.mean((u / scale) ** 2, axis=1))
+
+
+def _tip_axis(model):
+    """(the tip element's rows of the F operator, the rest axis): built once per model."""
+    if "_tip_axis" not in model.__dict__:
+        nodes = np.unique(model.C.indices // 3)
+        tets = model.mesh.tets
+        # the elements holding the end effector: those with the most of its embedding nodes
+        count = np.isin(tets, nodes).sum(axis=1)
+        elems = np.flatnonzero(count == count.max())
+        base = model.X.reshape(-1, 3)[model.fixed_nodes].mean(axis=0) if len(model.fixed_nodes) else \
+            model.X.reshape(-1, 3).mean(axis=0)
+        axis = model.p0 - base
+        axis = axis / max(np.linalg.norm(axis), 1e-300)
+        model.deformation_gradients(np.zeros(model.n_dof))  # builds model._F_op
+        nq = model._G_qp.shape[1]
+        rows = ((elems[:, None] * nq + np.arange(nq)[None]) * 9)[..., None] + np.arange(9)
+        op = model._F_op[rows.ravel()]
+        model._tip_axis = (op, len(elems) * nq, axis)
+    return model._tip_axis
+
+
+def direction(model, q) -> np.ndarray:
+    """The robot's axis at the tip (unit vector), carried by the tip element's mean deformation gradient."""
+    op, m, axis = _tip_axis(model)
+    F = np.eye(3) + (op @ q).reshape(m, 3, 3).mean(axis=0)
+    d = F @ axis
+    return d / np.linalg.norm(d)
+
+
+def point_maps(model, q, u, A, fac) -> dict:
+    """The maps at one verified equilibrium (q, u) with its sensitivity A and an LU of its tangent."""
+    s = np.linalg.svd(A, compute_uv=False) if A is not None and A.size else np.zeros(1)
+    CT = model.C_free.T.toarray()
+    G = model.C_free @ fac.solve(CT)  # C K^-1 C^T, 3 x 3
+    d = direction(model, q)
+    axis = _tip_axis(model)[2]
+    return {"effort": float(effort(model, u)[0]), "steerability": float(s.min()),
+            "compliance": float(np.linalg.eigvalsh(0.5 * (G + G.T)).max()),
+            "tilt": float(np.degrees(np.arccos(np.clip(d @ axis, -1.0, 1.0)))),
+            "compliance_matrix": G, "direction": d, "states": model.actuator_states(q)}
+
+
+def stack(maps: list[dict], n_u: int) -> dict:
+    """Arrays from a list of :func:`point_maps` dicts (None: a point without maps, NaN there)."""
+    k = len(maps)
+    out = {name: np.full(k, np.nan) for name in MAPS}
+    out["compliance_matrix"] = np.full((k, 3, 3), np.nan)
+    out["direction"] = np.full((k, 3), np.nan)
+    out["states"] = np.full((k, n_u), np.nan)
+    for i, m in enumerate(maps):
+        if m is None:
+            continue
+        for key in out:
+            out[key][i] = m[key]
+    return out

@@ -1,0 +1,184 @@
+"""The workspace's boundary surface and volume (issue: the workspace's true size), the point maps, the
+result files read back by meshio, and the interactive report rendered by a real browser."""
+
+import csv
+import itertools
+import shutil
+
+import meshio
+import numpy as np
+import pytest
+
+from casadi_ws.fem.model import StaticModel
+from casadi_ws.solvers.equilibrium import solve_equilibrium, tangent_factorization
+from casadi_ws.solvers.sensitivity import sensitivity
+from casadi_ws.workspace.boundary import BoundarySettings, _closed, boundary, distance_outside
+from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
+from casadi_ws.workspace.maps import point_maps
+from casadi_ws.workspace.measures import measures
+from conftest import cantilever, small_trunk
+
+
+def jacobian_integral(model, n=3):
+    """V = int_U |det dp/du| du by n^3-point Gauss-Legendre, and the tips at the Gauss points (verified
+    equilibria, so points of the workspace). Exact for a one-to-one map whose det keeps its sign."""
+    x, w = np.polynomial.legendre.leggauss(n)
+    lo, hi = model.u_min, model.u_max
+    V, dets, tips, q, u0 = 0.0, [], [], None, None
+    for a, b, c in itertools.product(range(n), repeat=3):
+        u = lo + (np.array([x[a], x[b], x[c]]) + 1) / 2 * (hi - lo)
+        eq = solve_equilibrium(model, u, q0=q, u0=u0)
+        assert eq.converged
+        q, u0 = eq.q, u
+        A, _ = sensitivity(model, eq.q, tangent_factorization(model, eq.q, u))
+        dets.append(np.linalg.det(A))
+        tips.append(eq.tip)
+        V += w[a] * w[b] * w[c] * abs(dets[-1]) * np.prod((hi - lo) / 2)
+    return V, np.array(dets), np.array(tips)
+
+
+@pytest.fixture(scope="module")
+def trunk3():
+    return StaticModel(small_trunk(n_cables=3))
+
+
+def test_volume_against_the_jacobian_integral_and_refinement(trunk3):
+    V_ref, dets, tips = jacobian_integral(trunk3, 4)
+    assert np.all(dets < 0) or np.all(dets > 0)  # one sign: the integral is the volume
+    b5 = boundary(trunk3, BoundarySettings(n=5))
+    b9 = boundary(trunk3, BoundarySettings(n=9))
+    for b in (b5, b9):
+        assert b.method == "input-faces" and b.closed and _closed(b.triangles)
+        assert b.volume > 0  # outward orientation
+    assert abs(b5.volume - V_ref) < 0.03 * V_ref
+    assert abs(b9.volume - V_ref) < abs(b5.volume - V_ref)  # converges under refinement
+    assert abs(b9.volume - V_ref) < 0.01 * V_ref
+    assert abs(b5.volume - V_ref) <= b5.volume_error  # the estimate covers the error
+    # every verified equilibrium lies inside the surface or on it within its tolerance
+    assert np.all(distance_outside(b5, tips) <= b5.tolerance)
+
+
+def test_a_planted_fault_breaks_the_closed_check(trunk3):
+    b = boundary(trunk3, BoundarySettings(n=3))
+    T = b.triangles.copy()
+    assert _closed(T)
+    T[0] = T[0, ::-1]  # one triangle turned over
+    assert not _closed(T)
+    assert not _closed(b.triangles[1:])  # a hole
+
+
+def test_four_inputs_close_on_the_faces_with_one_cable_of_each_pair_free():
+    model = StaticModel(small_trunk(n_cables=4, resolution=0.5))
+    b = boundary(model, BoundarySettings(n=3))
+    assert b.method == "input-faces" and b.closed and b.volume > 0
+    assert any("faces of U bound the workspace" in n for n in b.notes)
+
+
+def test_two_inputs_give_the_surface_and_its_boundary_curve():
+    model = StaticModel(small_trunk(n_cables=2))
+    b = boundary(model, BoundarySettings(n=5))
+    assert b.method == "input-patch" and b.volume == 0.0 and b.area > 0
+    assert len(b.curve) == 4 * 4 and len(set(b.curve.tolist())) == 16
+
+
+def test_tip_compliance_of_a_cantilever_against_beam_theory():
+    pb = cantilever(n=2, slender=10, model="linear", E=1e6, nu=0.3, L=0.2, order=2)
+    m = StaticModel(pb)
+    q = np.zeros(m.n_dof)
+    maps = point_maps(m, q, np.zeros(m.n_u), None, tangent_factorization(m, q, np.zeros(m.n_u)))
+    h, L, E, nu = 0.02, 0.2, 1e6, 0.3
+    bending = L**3 / (3 * E * h**4 / 12)
+    shear = L / (5 / 6 * E / (2 * (1 + nu)) * h * h)  # Timoshenko
+    assert maps["compliance"] == pytest.approx(bending + shear, rel=0.03)
+    assert maps["tilt"] == pytest.approx(0.0, abs=1e-9) and maps["effort"] == 0.0
+
+
+def test_steerability_and_tilt_against_finite_differences():
+    m = StaticModel(small_trunk(n_cables=2))
+    u = np.array([40.0, 20.0])
+    eq = solve_equilibrium(m, u)
+    fac = tangent_factorization(m, eq.q, u)
+    A, _ = sensitivity(m, eq.q, fac)
+    maps = point_maps(m, eq.q, u, A, fac)
+    d = 1e-3
+    A_fd = np.column_stack([(solve_equilibrium(m, u + d * e, q0=eq.q, u0=u).tip
+                             - solve_equilibrium(m, u - d * e, q0=eq.q, u0=u).tip) / (2 * d) for e in np.eye(2)])
+    assert maps["steerability"] == pytest.approx(np.linalg.svd(A_fd, compute_uv=False).min(), rel=1e-4)
+    assert 1.0 < maps["tilt"] < 90.0  # bent by the cables
+    # the tip element's axis turns the way the tip's neighbourhood does: along the deformed axis near the tip
+    assert maps["direction"][2] > 0.5
+
+
+@pytest.fixture(scope="module")
+def fb_dir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("fb3")
+    r = forward_backward(small_trunk(n_cables=3), FBSettings(step=0.008, workers=1, progress=False))
+    r.measures = measures(r)
+    r.save(d)
+    return r, d
+
+
+def test_forward_backward_reports_the_boundary_volume_and_maps(fb_dir):
+    r, d = fb_dir
+    m = r.measures
+    assert m["volume_method"] == "boundary" and m["volume"] < 0.5 * m["cell_volume"]
+    assert r.boundary.checks["points_outside"] == 0
+    with open(d / "points.csv") as f:
+        rows = list(csv.DictReader(f))
+    for key in ("effort", "steerability", "compliance", "tilt", "state1", "state3"):
+        assert all(np.isfinite(float(row[key])) for row in rows)
+    with open(d / "failures.csv") as f:
+        fails = list(csv.DictReader(f))
+    assert list(fails[0]) == ["target_x", "target_y", "target_z", "status", "reason", "closest_x", "closest_y",
+                              "closest_z"]
+    assert {row["reason"] for row in fails} <= {"not_reached", "prefiltered", "gave_up", "inadmissible",
+                                                 "solve_failed", "iteration_limit"}
+    missed = [row for row in fails if row["reason"] == "not_reached"]
+    assert all(row["closest_x"] != "" for row in missed)
+
+
+def test_meshio_reads_every_mesh_file_back(fb_dir):
+    r, d = fb_dir
+    pts = meshio.read(d / "points.vtu")
+    assert len(pts.points) == r.n_points and "compliance" in pts.point_data
+    cells = meshio.read(d / "cells.vtu")
+    assert cells.cells[0].type == "hexahedron" and len(cells.cells[0].data) == r.n_points
+    for name in ("boundary.vtu", "boundary.stl"):
+        b = meshio.read(d / name)
+        assert len(b.cells_dict["triangle"]) == len(r.boundary.triangles)
+    # hexahedra with positive volume (VTK's corner order)
+    P = cells.points[cells.cells[0].data[0]]
+    assert np.linalg.det(np.array([P[1] - P[0], P[3] - P[0], P[4] - P[0]])) > 0
+
+
+def _browser():
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+def test_report_renders_in_headless_chromium(fb_dir, tmp_path):
+    from casadi_ws.io.report import write_report
+
+    r, d = fb_dir
+    page_file = write_report(r, tmp_path / "report.html", small_trunk(n_cables=3).mesh)
+    exe = _browser()
+    if exe is None:
+        pytest.skip("no chromium on this machine (make test installs Debian's chromium with apt; it failed)")
+    from playwright.sync_api import sync_playwright
+    from PIL import Image
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=exe, args=["--use-angle=swiftshader",
+                                                               "--enable-unsafe-swiftshader", "--no-sandbox"])
+        page = browser.new_page(viewport={"width": 1400, "height": 800})
+        page.goto(page_file.as_uri())
+        page.wait_for_selector("#workspace .gl-container canvas", timeout=60000)
+        page.wait_for_timeout(1000)
+        assert page.locator("#summary tr").count() >= 5
+        assert "volume" in page.locator("#summary").inner_text()
+        shot = tmp_path / "shot.png"
+        page.locator("#workspace").screenshot(path=str(shot))
+        browser.close()
+    img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    # the WebGL scene drew the robot, the surface and the points: many colours, much non-white
+    assert (img.sum(axis=2) < 740).mean() > 0.05
+    assert len(np.unique(img.reshape(-1, 3), axis=0)) > 200
