@@ -65,7 +65,7 @@ def sample_forward(problem, n_d, n_lines, seed=0):
         sweep(model, lines[0], settings)
         t_first = time.perf_counter() - t0
         t0 = time.perf_counter()
-        _, status, _, _, _, _ = sweep(model, np.vstack(lines), settings)
+        status = sweep(model, np.vstack(lines), settings)[1]
         t_all = time.perf_counter() - t0
     points = n_lines * n_d
     return (t_all - t_first) / points, points, int(np.sum(status[n_d:] != 0))

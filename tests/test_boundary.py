@@ -109,6 +109,22 @@ def test_steerability_and_tilt_against_finite_differences():
     assert maps["direction"][2] > 0.5
 
 
+def test_forward_maps_agree_with_the_maps_at_the_same_equilibrium():
+    from casadi_ws.workspace.forward import ForwardSettings, forward
+
+    pb = small_trunk(n_cables=2)
+    m = StaticModel(pb)
+    res = forward(pb, settings=ForwardSettings(n_d=3, progress=False), model=m)
+    maps = res.maps()
+    k = 4  # the centre of U
+    eq = solve_equilibrium(m, res.u[k])
+    fac = tangent_factorization(m, eq.q, eq.u)
+    ref = point_maps(m, eq.q, eq.u, sensitivity(m, eq.q, fac)[0], fac)
+    for name in ("steerability", "compliance", "tilt", "effort"):
+        assert maps[name][k] == pytest.approx(ref[name], rel=2e-2), name
+    np.testing.assert_allclose(maps["states"][k], ref["states"], rtol=1e-9)
+
+
 @pytest.fixture(scope="module")
 def fb_dir(tmp_path_factory):
     d = tmp_path_factory.mktemp("fb3")

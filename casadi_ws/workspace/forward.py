@@ -30,6 +30,8 @@ from ..runtime.run_state import RunState, fingerprint
 from ..solvers.admissible import VIOLATIONS, admissibility, encode
 from ..solvers.equilibrium import (CONVERGED, OUTSIDE_BOUNDS, Equilibrium, inside_bounds, newton_krylov,
                                    solve_equilibrium, tangent_factorization, verify)
+from ..solvers.sensitivity import sensitivity
+from .maps import MAPS, point_maps
 from .result import WorkspaceResult, describe
 
 __all__ = ["ForwardSettings", "forward", "input_grid", "lagrange_weights", "line_stride", "snake_order", "sweep"]
@@ -255,11 +257,14 @@ def _solve_line(model, us, first, settings, tol, sw: _Sweep, counters):
     return out
 
 
-def _check_line(model, line) -> np.ndarray:
-    """Admissibility masks of a line's points (0 for points that did not converge). Newton points get every
-    check, with the pivots of their own LU; a point between two Newton points of the line inherits
-    stability and self-penetration from them when both pass those, and gets the cheap checks itself."""
+def _check_line(model, line) -> tuple[np.ndarray, np.ndarray]:
+    """Admissibility masks of a line's points (0 for points that did not converge), and their maps. Newton
+    points get every check, with the pivots of their own LU; a point between two Newton points of the line
+    inherits stability and self-penetration from them when both pass those, and gets the cheap checks
+    itself. The maps (:mod:`.maps`) come from the point's own LU, or, between Newton points, from the
+    nearest one's (at most stride / 2 grid steps away: ~1 % off)."""
     masks = np.zeros(len(line), dtype=np.int64)
+    maps = np.full((len(line), len(MAPS) + model.n_u), np.nan)
     costly = encode(("unstable", "self_penetration"))
     done = np.zeros(len(line), dtype=bool)
     for j, eq in enumerate(line):
@@ -273,7 +278,16 @@ def _check_line(model, line) -> np.ndarray:
         left, right = anchors[anchors < j], anchors[anchors > j]
         inherit = left.size and right.size and not (masks[left[-1]] | masks[right[0]]) & costly
         masks[j] = admissibility(model, eq.q, eq.u, eq.factorization, inherited=bool(inherit)).mask
-    return masks
+    for j, eq in enumerate(line):
+        if eq.status != CONVERGED:
+            continue
+        fac = eq.factorization if done[j] or not anchors.size else line[anchors[np.argmin(np.abs(anchors - j))]].factorization
+        if fac is None:
+            fac = tangent_factorization(model, eq.q, eq.u)
+        A, _ = sensitivity(model, eq.q, fac)
+        m = point_maps(model, eq.q, eq.u, A, fac)
+        maps[j] = [m[name] for name in MAPS] + list(m["states"])
+    return masks, maps
 
 
 def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progress=None,
@@ -290,6 +304,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
     status = np.zeros(n, dtype=int)
     residual = np.zeros(n)
     violations = np.zeros(n, dtype=np.int64)
+    maps = np.full((n, len(MAPS) + model.n_u), np.nan)
     states = np.zeros((n, model.n_dof)) if settings.store_states else None
     counters = dict(solves=0, newton_iterations=0, factorizations=0, load_steps=0, restarts=0,
                     krylov_iterations=0, interpolated=0, interpolation_failed=0)
@@ -300,6 +315,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
         first = int(resume["next"])
         tips[:first], status[:first], residual[:first] = resume["tips"], resume["status"], resume["residual"]
         violations[:first] = resume["violations"]
+        maps[:first] = resume["maps"]
         if states is not None:
             states[:first] = resume["states"]
         counters.update(resume["counters"])
@@ -314,6 +330,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
 
     def state(nxt):
         st = dict(next=nxt, tips=tips[:nxt], status=status[:nxt], residual=residual[:nxt], violations=violations[:nxt],
+                  maps=maps[:nxt],
                   counters=dict(counters),
                   hist_u=np.array([h[0] for h in sw.history]).reshape(len(sw.history), model.n_u),
                   hist_q=np.array([h[1] for h in sw.history]).reshape(len(sw.history), model.n_dof),
@@ -335,7 +352,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
                 except KeyboardInterrupt:  # a second Ctrl-C mid-line: forget it, it is solved again on resume
                     sw.history, sw.fac, sw.start, counters = snapshot
                     raise
-                violations[a:b] = _check_line(model, line)
+                violations[a:b], maps[a:b] = _check_line(model, line)
                 for j, eq in enumerate(line, start=a):
                     tips[j], status[j], residual[j] = eq.tip, eq.status, eq.residual
                     if states is not None and eq.status == CONVERGED:
@@ -351,7 +368,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
         if checkpoint is not None:
             checkpoint(state(done))
         raise
-    return tips, status, residual, violations, states, counters
+    return tips, status, residual, violations, maps, states, counters
 
 
 def _sweep_job(model, us, settings):
@@ -393,7 +410,7 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
     workers = max(1, min(int(workers), n // 50 or 1))
     fp = fingerprint("forward", model, {k: getattr(settings, k) for k in
                                         ("n_d", "predictor", "reuse_factorization", "krylov", "tol", "max_iter",
-                                         "store_states", "stride")} | {"workers": workers, "format": 2})
+                                         "store_states", "stride")} | {"workers": workers, "format": 3})
     run = RunState(checkpoint_dir, "forward", fp, resume, t0)
     try:
         if workers == 1:
@@ -406,15 +423,15 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
                 run.save({"next": st["next"], "counters": st["counters"]},
                          {k: v for k, v in st.items() if k not in ("next", "counters")})
 
-            tips, status, residual, violations, states, counters = sweep(
+            tips, status, residual, violations, maps, states, counters = sweep(
                 model, us, settings, progress=bar.update if bar else None, resume=resume_state,
                 checkpoint=checkpoint if checkpoint_dir is not None else None)
         else:
             own = executor is None
             executor = executor or ProcessExecutor(workers, problem)
             try:
-                tips, status, residual, violations, states, counters = _parallel(problem, us, settings, workers, bar, run,
-                                                                     executor)
+                tips, status, residual, violations, maps, states, counters = _parallel(
+                    problem, us, settings, workers, bar, run, executor)
             finally:
                 if own:
                     executor.close()
@@ -431,6 +448,9 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
     counters["excluded"] = {v: int(np.count_nonzero(excluded & (violations >> i & 1 == 1)))
                             for i, v in enumerate(VIOLATIONS)}
     arrays = dict(excluded_points=tips[excluded], excluded_u=us[excluded], excluded_violations=violations[excluded])
+    for i, name in enumerate(MAPS):
+        arrays[f"map_{name}"] = maps[ok, i]
+    arrays["map_states"] = maps[ok, len(MAPS):]
     return WorkspaceResult(
         method="forward", points=tips[ok], u=us[ok], failed_u=us[~converged], failed_status=status[~converged],
         failed_residual=residual[~converged], states=states[ok] if states is not None else None,
@@ -453,7 +473,7 @@ def _parallel(problem, us, settings, workers, bar, run: RunState, executor: Exec
         for i, c in saved_meta.get("pieces", {}).items():
             i = int(i)
             results[i] = (saved[f"tips_{i}"], saved[f"status_{i}"], saved[f"residual_{i}"],
-                          saved[f"violations_{i}"], saved.get(f"states_{i}"), c)
+                          saved[f"violations_{i}"], saved[f"maps_{i}"], saved.get(f"states_{i}"), c)
             if bar is not None:
                 bar.update(len(pieces[i]))
 
@@ -462,10 +482,10 @@ def _parallel(problem, us, settings, workers, bar, run: RunState, executor: Exec
         for i, r in enumerate(results):
             if r is not None:
                 arrays.update({f"tips_{i}": r[0], f"status_{i}": r[1], f"residual_{i}": r[2],
-                               f"violations_{i}": r[3]})
-                if r[4] is not None:
-                    arrays[f"states_{i}"] = r[4]
-        run.save({"pieces": {i: r[5] for i, r in enumerate(results) if r is not None}}, arrays)
+                               f"violations_{i}": r[3], f"maps_{i}": r[4]})
+                if r[5] is not None:
+                    arrays[f"states_{i}"] = r[5]
+        run.save({"pieces": {i: r[6] for i, r in enumerate(results) if r is not None}}, arrays)
 
     todo = [i for i in range(len(pieces)) if results[i] is None]
     for k, r in executor.map_unordered(_sweep_job, problem, [(us[pieces[i]], settings) for i in todo]):
@@ -477,6 +497,7 @@ def _parallel(problem, us, settings, workers, bar, run: RunState, executor: Exec
     status = np.concatenate([r[1] for r in results])
     residual = np.concatenate([r[2] for r in results])
     violations = np.concatenate([r[3] for r in results])
-    states = np.vstack([r[4] for r in results]) if settings.store_states else None
-    counters = {k: sum(r[5][k] for r in results) for k in results[0][5]}
-    return tips, status, residual, violations, states, counters
+    maps = np.vstack([r[4] for r in results])
+    states = np.vstack([r[5] for r in results]) if settings.store_states else None
+    counters = {k: sum(r[6][k] for r in results) for k in results[0][6]}
+    return tips, status, residual, violations, maps, states, counters
