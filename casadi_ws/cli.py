@@ -98,7 +98,7 @@ def _print_finished(out: Path) -> int:
     return 0
 
 
-_SOLVE_DEFAULTS = {"method": "forward", "nd": 11, "step": 0.004, "strategy": "uniform", "backward": "reduced",
+_SOLVE_DEFAULTS = {"method": "forward", "nd": 11, "step": None, "strategy": "uniform", "backward": "reduced",
                    "workers": 1}
 
 
@@ -168,7 +168,7 @@ def cmd_solve(args) -> int:
         from .workspace.backward import BackwardSettings
         from .workspace.forward_backward import FBSettings, forward_backward
 
-        if not args.step > 0 or not np.isfinite(args.step):
+        if args.step is not None and (not args.step > 0 or not np.isfinite(args.step)):
             raise UsageError(f"--step: expected a grid step > 0 in metres, got {args.step}")
         if args.max_cells < 1:
             raise UsageError(f"--max-cells: expected an integer >= 1, got {args.max_cells}")
@@ -420,7 +420,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--stride", type=int, default=None,
                    help="forward: Newton every STRIDE-th point of a grid line, the others interpolated and "
                         "verified (n_d // 12, at most 8; 1: Newton everywhere)")
-    s.add_argument("--step", type=float, default=None, help="fb: grid step s_Ed in metres (0.004)")
+    s.add_argument("--step", type=float, default=None, help="fb: grid step s_Ed in metres (default: the robot's reach / 48, rounded; 4 mm on the trunk)")
     s.add_argument("--strategy", choices=["uniform", "relative"], default=None, help="fb: discretisation (uniform)")
     s.add_argument("--backward", choices=["reduced", "ipopt"], default=None, help="fb: backward solver (reduced)")
     s.add_argument("--out", required=True, help="output directory")

@@ -198,3 +198,11 @@ def test_report_renders_in_headless_chromium(fb_dir, tmp_path):
     # the WebGL scene drew the robot, the surface and the points: many colours, much non-white
     assert (img.sum(axis=2) < 740).mean() > 0.05
     assert len(np.unique(img.reshape(-1, 3), axis=0)) > 200
+
+
+def test_the_default_grid_step_scales_with_the_robot():
+    from casadi_ws.workspace.interval import default_step
+
+    assert default_step(StaticModel(small_trunk(n_cables=2))) == 0.004  # the trunk keeps its 4 mm
+    assert default_step(StaticModel(cantilever(L=0.01))) == pytest.approx(2e-4)  # a 1 cm finger
+    assert default_step(StaticModel(cantilever(L=1.0))) == pytest.approx(0.02)  # a 1 m arm

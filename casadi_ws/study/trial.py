@@ -29,7 +29,7 @@ def _workspace(problem, w: dict):
     from ..workspace.backward import BackwardSettings
     from ..workspace.forward_backward import FBSettings, forward_backward
 
-    settings = FBSettings(step=w.get("step", 0.004), strategy=w.get("strategy", "uniform"), progress=False,
+    settings = FBSettings(step=w.get("step"), strategy=w.get("strategy", "uniform"), progress=False,
                           backward=BackwardSettings(formulation=w.get("backward", "reduced")))
     return forward_backward(problem, settings, model=model)
 
@@ -47,7 +47,7 @@ def run_trial(data: dict, base_dir: str, source: str, workspace: dict, needed: l
                 "time_s": time.perf_counter() - t0, "result": None}
     try:
         result = _workspace(problem, workspace)
-        step = workspace.get("step", 0.004)
+        step = workspace.get("step")
         m = measures(result, step=step, task=problem.task)
         result.measures = m
         out = {"volume": m["volume"], "cells": m["cells"], "area": m.get("area"), "task_share": m.get("task_share")}

@@ -41,7 +41,7 @@ from ..solvers.sensitivity import bounded_step, closest_to_box, curvature, sensi
 from ..status import Status
 from .backward import BackwardSettings, backward
 from .boundary import BoundarySettings, boundary
-from .interval import Grid, interval_box, neighbourhood
+from .interval import Grid, default_step, interval_box, neighbourhood
 from .maps import point_maps, stack
 from .result import WorkspaceResult, describe
 
@@ -52,8 +52,9 @@ __all__ = ["Exploration", "FBSettings", "algorithm1", "forward_backward"]
 class FBSettings:
     """Settings of the forward-backward method."""
 
-    step: float = 0.004
-    """Grid step s_Ed of the uniform strategy, metres."""
+    step: float | None = None
+    """Grid step s_Ed of the uniform strategy, metres; None: scaled to the robot
+    (:func:`casadi_ws.workspace.interval.default_step`: its reach / 48, rounded; 4 mm on the trunk)."""
     strategy: str = "uniform"
     """``uniform`` (global grid anchored at the initial tip) or ``relative`` (step 5 % of ||p||)."""
     relative_ratio: float = 0.05
@@ -428,6 +429,8 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
         t0 = time.perf_counter()
         model = model or StaticModel(problem)
         build_model = time.perf_counter() - t0
+        if settings.step is None:
+            settings.step = default_step(model)
         # the budget is not part of the answer: a run stopped by it resumes with a larger one
         # checkpoint format 4: reached points carry their maps, failures their closest points (2: frontiers
         # carry Q); an older checkpoint would resume without them and so end

@@ -82,7 +82,7 @@ def read_task(box=None, csv: str | Path | None = None) -> Task:
 def _grid(result, step, origin):
     if "cell_step" in result.arrays and (step is None or np.isclose(step, float(result.arrays["cell_step"]))):
         return np.asarray(result.arrays["grid_origin"], float), float(result.arrays["cell_step"])
-    step = 0.004 if step is None else float(step)
+    step = float(result.problem.get("default_step", 0.004)) if step is None else float(step)
     origin = result.points[0] if origin is None and result.n_points else (np.zeros(3) if origin is None else origin)
     return np.asarray(origin, float), step
 

@@ -33,6 +33,7 @@ import numpy as np
 
 from ..solvers.admissible import VIOLATIONS
 from ..status import Status
+from .interval import default_step
 from .maps import MAPS
 
 __all__ = ["FAILURE_WARNING", "WorkspaceResult", "describe", "load_result"]
@@ -296,5 +297,5 @@ def describe(problem, model) -> dict:
         "actuators": [{"name": a.name, "kind": a.kind, "unit": a.input_unit} for a in model.actuators],
         "u_min": model.u_min.tolist(), "u_max": model.u_max.tolist(),
         "end_effector": np.asarray(problem.end_effector).tolist(), "tolerance": problem.solver.tolerance,
-        "admissibility": asdict(problem.admissibility),
+        "admissibility": asdict(problem.admissibility), "default_step": default_step(model),
     }
