@@ -206,3 +206,12 @@ def test_the_default_grid_step_scales_with_the_robot():
     assert default_step(StaticModel(small_trunk(n_cables=2))) == 0.004  # the trunk keeps its 4 mm
     assert default_step(StaticModel(cantilever(L=0.01))) == pytest.approx(2e-4)  # a 1 cm finger
     assert default_step(StaticModel(cantilever(L=1.0))) == pytest.approx(0.02)  # a 1 m arm
+
+
+def test_boundary_and_report_commands_refuse_bad_input_in_one_line(tmp_path):
+    from conftest import run_cli
+
+    for args, msg in ((["boundary", tmp_path], "not a result directory"),
+                      (["report", tmp_path], "not a result directory")):
+        r = run_cli(*args)
+        assert r.returncode == 2 and msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
