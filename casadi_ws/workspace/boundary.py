@@ -152,13 +152,12 @@ def _key(s):
     return tuple(np.rint(np.asarray(s) * 720720).astype(np.int64).tolist())  # exact for n - 1 | 720720
 
 
-def _solve_nodes(model, us: np.ndarray, want_A: bool):
-    """Equilibria at ``us`` (in continuation order): tips, status, violations, A (3 x n_u each, if asked),
-    LU factorisations. Each start is the nearest solved node's state plus its tangent step S du."""
+def _solve_nodes(model, us: np.ndarray):
+    """Equilibria at ``us`` (in continuation order): tips, status, admissibility violations, and the number
+    of LU factorisations. Each start is the nearest solved node's state plus its tangent step S du."""
     tips = np.full((len(us), 3), np.nan)
     status = np.zeros(len(us), dtype=int)
     viol = np.zeros(len(us), dtype=np.int64)
-    As = np.full((len(us), 3, model.n_u), np.nan)
     done = []  # (u, q, S)
     span = np.where(model.u_max > model.u_min, model.u_max - model.u_min, 1.0)
     n_fac = 0
@@ -181,18 +180,17 @@ def _solve_nodes(model, us: np.ndarray, want_A: bool):
             from ..solvers.equilibrium import tangent_factorization
 
             fac = tangent_factorization(model, eq.q, eq.u)
-        A, S = sensitivity(model, eq.q, fac)
-        As[k] = A
+        S = sensitivity(model, eq.q, fac)[1]
         viol[k] = admissibility(model, eq.q, eq.u, fac).mask
         done.append((u.copy(), eq.q, S))
-    return tips, status, viol, (As if want_A else None), n_fac
+    return tips, status, viol, n_fac
 
 
-def _solve_job(model, us, want_A):
-    return _solve_nodes(model, us, want_A)
+def _solve_job(model, us):
+    return _solve_nodes(model, us)
 
 
-def _order(nodes: list, n_u: int) -> list:
+def _order(nodes: list) -> list:
     """Continuation order: greedy nearest neighbour from the lower corner (all inputs at their minimum)."""
     P = np.array(nodes, dtype=float)
     left = list(range(len(P)))
@@ -340,15 +338,15 @@ class _Nodes:
                 keys.setdefault(_key(s), s)
         todo = [k for k in keys if k not in self.tip]
         if todo:
-            order = [todo[m] for m in _order([keys[k] for k in todo], n_u)]
+            order = [todo[m] for m in _order([keys[k] for k in todo])]
             workers = getattr(self.executor, "workers", 1) if self.executor is not None else 1
             chunks = [c for c in np.array_split(np.arange(len(order)), workers) if len(c)]
-            jobs = [(self.lo + np.array([keys[order[m]] for m in c]) * self.span, False) for c in chunks]
+            jobs = [(self.lo + np.array([keys[order[m]] for m in c]) * self.span,) for c in chunks]
             if self.executor is None or len(jobs) == 1 and workers == 1:
                 answers = [_solve_nodes(self.model, *job) for job in jobs]
             else:
                 answers = self.executor.map(_solve_job, self.problem, jobs)
-            for c, (tips, status, v, _, n_fac) in zip(chunks, answers):
+            for c, (tips, status, v, n_fac) in zip(chunks, answers):
                 self.factorizations += n_fac
                 for m, t, st, vv in zip(c, tips, status, v):
                     if st == CONVERGED:
