@@ -40,7 +40,7 @@ __all__ = ["MEASURES", "Objective", "Study", "StudyError", "Variable", "apply", 
 
 # name: (unit, what it is, direction a designer usually wants)
 MEASURES = {
-    "volume": ("m^3", "workspace cells x step^3", "maximize"),
+    "volume": ("m^3", "enclosed by the boundary surface (cells x step^3 where there is none)", "maximize"),
     "area": ("m^2", "area of the tip surface (two actuators)", "maximize"),
     "cells": ("", "workspace cells", "maximize"),
     "task_share": ("", "share of the task region reached", "maximize"),
