@@ -166,8 +166,9 @@ def _solve_nodes(model, us: np.ndarray):
         if done:
             near = min(done, key=lambda d: np.abs((d[0] - u) / span).max())
             u0, q0, S = near
-            # (a second-order term from the node before, (S_a - S_(a - du)) du / 2, cost more LUs: 268
-            # against 196 on the coarse 3-cable trunk, its S being from an LU one iterate away)
+            # second-order predictors cost more LUs, measured: (S_a - S_(a - du)) du / 2 268 against 196 on
+            # the coarse 3-cable trunk (its S from an LU one iterate away); the quadratic through q_(a - du)
+            # 531 against 335 on the shipped one (over a quarter of U's range it overshoots)
             guess = q0 + model.full(S @ (u - u0))
         eq = solve_equilibrium(model, u, q0=q0, u0=u0, guess=guess)
         n_fac += eq.factorizations
