@@ -37,8 +37,10 @@ pb = cw.load_problem(problem)
 t = time.perf_counter()
 r = forward_backward(pb, FBSettings(workers=2, progress=False))
 c = r.counters
+b = getattr(r, "boundary", None)
 print(json.dumps({"time": time.perf_counter() - t, "cells": c["feasible"], "lu": c["factorizations"],
-                  "excluded": c.get("excluded")}))
+                  "excluded": c.get("excluded"), "boundary_s": r.timings.get("boundary"),
+                  "volume": None if b is None or b.volume is None else abs(b.volume)}))
 """
 
 
@@ -88,7 +90,10 @@ def main():
         excluded = rs[0].get("excluded")
         removed = "" if excluded is None else (
             ", removed: " + (", ".join(f"{k} {v}" for k, v in excluded.items() if v) or "none"))
-        return f"{t:.1f} s, {rs[0]['cells']} cells, {rs[0]['lu'] / rs[0]['cells']:.2f} LU / cell{removed}"
+        b = rs[0].get("boundary_s")
+        surface = "" if b is None else (f", of which boundary {sum(r['boundary_s'] for r in rs) / len(rs):.1f} s"
+                                        + (f" (volume {rs[0]['volume'] * 1e6:.2f} cm³)" if rs[0]["volume"] else ""))
+        return f"{t:.1f} s, {rs[0]['cells']} cells, {rs[0]['lu'] / rs[0]['cells']:.2f} LU / cell{removed}{surface}"
 
     lines = [
         f"## Forward-backward, this code against `{base_rev}` (issue: {args.issue}) — "
