@@ -27,7 +27,7 @@ def tiny_study(tmp_path, **extra) -> Path:
          "set": {"mesh.resolution": 0.5},
          "variables": [{"path": "material.young_modulus", "values": [1.2e7, 1.8e7]},
                        {"path": "cables[*].u_max", "values": [60, 100]}],
-         "workspace": {"method": "fb", "step": 0.008}, "objectives": [{"maximize": "volume"}], "method": "grid"}
+         "workspace": {"method": "fb", "step": 0.008}, "objectives": [{"maximize": "area"}], "method": "grid"}
     d.update(extra)
     path = tmp_path / "study.yaml"
     path.write_text(yaml.safe_dump(d))
@@ -57,8 +57,8 @@ def test_a_grid_study_on_dask_reproduces_the_designs_solved_one_by_one(tmp_path)
             data = apply(base, {"mesh.resolution": 0.5, "material.young_modulus": E, "cables[*].u_max": umax})
             pb = cw.problem_from_dict(data, "design", REPO / "problems")
             r = cw.forward_backward(pb, cw.FBSettings(step=0.008, progress=False))
-            volumes[(E, umax)] = cw.measures(r, step=0.008)["volume"]
-    got = {(t.params["material.young_modulus"], t.params["cables[*].u_max"]): t.measures["volume"] for t in res.trials}
+            volumes[(E, umax)] = cw.measures(r, step=0.008)["area"]  # two cables: a surface, its area
+    got = {(t.params["material.young_modulus"], t.params["cables[*].u_max"]): t.measures["area"] for t in res.trials}
     assert got == volumes
     assert len(set(volumes.values())) > 1  # the designs differ: the study could have mixed them up
     best = max(volumes, key=volumes.get)
@@ -128,14 +128,14 @@ def test_an_optuna_study_with_two_objectives_on_two_workers(tmp_path):
     target = [0.0, 0.02, 0.19]
     path = tiny_study(tmp_path, method="optuna", trials=4, seed=3, target=target, reach_tolerance=1e-3,
                       variables=[{"path": "material.young_modulus", "range": [1.0e7, 3.0e7], "scale": "log"}],
-                      objectives=[{"maximize": "volume"}, {"minimize": "reach_tension"}])
+                      objectives=[{"maximize": "area"}, {"minimize": "reach_tension"}])
     r = cli("study", path, "--out", tmp_path / "out", "--workers", "2", "--quiet")
     assert r.returncode == 0, r.stderr
     got = rows(tmp_path / "out")
     assert len(got) == 4 and all(g["status"] == "complete" for g in got)
     E = [float(g["material.young_modulus"]) for g in got]
     assert all(1.0e7 <= e <= 3.0e7 for e in E) and len(set(E)) == 4
-    vol = np.array([float(g["volume"]) for g in got])
+    vol = np.array([float(g["area"]) for g in got])
     ten = np.array([float(g["reach_tension"]) for g in got])
     feas = np.array([g["feasible"] == "1" for g in got])
     assert np.all(np.array([float(g["reach_error"]) for g in got])[feas] <= 1e-3) and feas.any()
