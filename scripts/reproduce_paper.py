@@ -252,7 +252,7 @@ understate the agreement; the recall does not depend on that.
 
 - `fig14_operations.png`, `fig14_time.png`: Fig. 14, ours (solid) and the publication's (dashed).
 - `three_views_{2,3,4}cables.png`: Figs. 11-13.
-- Result directories `forward_*`, `fb_*` (points.csv, points.vtp, cells.vtu for ParaView).
+- Result directories `forward_*`, `fb_*` (points.csv, points.vtu, cells.vtu, boundary.vtu for ParaView).
 """
     (out / "report.md").write_text(text)
 

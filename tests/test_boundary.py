@@ -215,3 +215,15 @@ def test_boundary_and_report_commands_refuse_bad_input_in_one_line(tmp_path):
                       (["report", tmp_path], "not a result directory")):
         r = run_cli(*args)
         assert r.returncode == 2 and msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_a_forward_grid_gives_the_surface_without_a_solve(trunk3):
+    from casadi_ws.workspace.boundary import boundary_of
+    from casadi_ws.workspace.forward import ForwardSettings, forward
+
+    pb = trunk3.problem
+    res = forward(pb, settings=ForwardSettings(n_d=5, progress=False), model=trunk3)
+    b = boundary_of(res, pb, model=trunk3)
+    assert b.counters == {"solved_nodes": 0, "known_nodes": 98, "factorizations": 0}
+    assert b.closed and b.checks["points_outside"] == 0
+    assert b.volume == pytest.approx(boundary(trunk3, BoundarySettings(n=5)).volume, rel=1e-9)

@@ -275,9 +275,9 @@ def boundary(model, settings: BoundarySettings | None = None, executor=None, pro
         return Boundary(np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros((0, n_u)), "none",
                         notes=[f"no boundary surface ({why}); the volume is the cells'"])
     nodes = _Nodes(model, executor, problem, known)
-    n_known = len(nodes.tip)
+    known_keys = set(nodes.tip)
     b = _surface(model, nodes, n)
-    b.counters = {"solved_nodes": len(nodes.tip) - n_known, "known_nodes": n_known,
+    b.counters = {"solved_nodes": len(nodes.used - known_keys), "known_nodes": len(nodes.used & known_keys),
                   "factorizations": nodes.factorizations}
     return b
 
@@ -321,6 +321,7 @@ class _Nodes:
         self.model, self.executor, self.problem = model, executor, problem
         self.lo, self.span = model.u_min, model.u_max - model.u_min
         self.tip, self.viol = {}, {}
+        self.used = set()  # the nodes of every face asked for
         self.factorizations = 0
         if known is not None:
             for u, p in zip(np.asarray(known[0]), np.asarray(known[1])):
@@ -337,6 +338,7 @@ class _Nodes:
         for g in grids:
             for s in g:
                 keys.setdefault(_key(s), s)
+        self.used |= set(keys)
         todo = [k for k in keys if k not in self.tip]
         if todo:
             order = [todo[m] for m in _order([keys[k] for k in todo])]
