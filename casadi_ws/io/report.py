@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..fem.surface import boundary_faces
 from ..workspace.result import _json_default
 
 __all__ = ["write_report"]
@@ -20,21 +21,12 @@ __all__ = ["write_report"]
 _UNITS = {"effort": "", "steerability": "m per input unit", "compliance": "m/N", "tilt": "deg"}
 
 
-def _body_surface(mesh):
-    """Vertices and triangles of the body's outer surface at rest (faces that belong to one tetrahedron)."""
-    tets = np.asarray(mesh.tets)[:, :4]
-    faces = np.vstack([tets[:, [0, 2, 1]], tets[:, [0, 1, 3]], tets[:, [1, 2, 3]], tets[:, [0, 3, 2]]])
-    key = np.sort(faces, axis=1)
-    _, first, count = np.unique(key, axis=0, return_index=True, return_counts=True)
-    return np.asarray(mesh.nodes, float), faces[first[count == 1]]
-
-
 def _figure(result, mesh):
     import plotly.graph_objects as go
 
     traces = []
     if mesh is not None:
-        X, T = _body_surface(mesh)
+        X, T = np.asarray(mesh.nodes, float), boundary_faces(mesh)[:, :3]
         traces.append(go.Mesh3d(x=X[:, 0], y=X[:, 1], z=X[:, 2], i=T[:, 0], j=T[:, 1], k=T[:, 2],
                                 color="lightgray", opacity=0.35, name="robot at rest", showlegend=True,
                                 hoverinfo="skip"))

@@ -222,10 +222,11 @@ def _area(V, T) -> float:
 
 
 def _closed(T) -> bool:
-    """Every directed edge once, and its reverse once: a closed, consistently oriented surface."""
-    e = np.vstack([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
-    directed = {tuple(x) for x in e.tolist()}
-    return len(directed) == len(e) and all((b, a) in directed for a, b in directed)
+    """Every edge shared by exactly two triangles, running through them in opposite directions: a closed,
+    consistently oriented surface."""
+    from ..fem.surface import edge_report
+
+    return edge_report(T) == (0, 0)
 
 
 def _outward(face, three_face) -> int:
