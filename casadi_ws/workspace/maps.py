@@ -66,12 +66,16 @@ def point_maps(model, q, u, A, fac) -> dict:
     s = np.linalg.svd(A, compute_uv=False) if A is not None and A.size else np.zeros(1)
     CT = model.C_free.T.toarray()
     G = model.C_free @ fac.solve(CT)  # C K^-1 C^T, 3 x 3
+    return {**state_maps(model, q, u), "steerability": float(s.min()),
+            "compliance": float(np.linalg.eigvalsh(0.5 * (G + G.T)).max()), "compliance_matrix": G}
+
+
+def state_maps(model, q, u) -> dict:
+    """The maps that need no LU: effort, tilt and direction, and the actuators' states."""
     d = direction(model, q)
     axis = _tip_axis(model)[2]
-    return {"effort": float(effort(model, u)[0]), "steerability": float(s.min()),
-            "compliance": float(np.linalg.eigvalsh(0.5 * (G + G.T)).max()),
-            "tilt": float(np.degrees(np.arccos(np.clip(d @ axis, -1.0, 1.0)))),
-            "compliance_matrix": G, "direction": d, "states": model.actuator_states(q)}
+    return {"effort": float(effort(model, u)[0]), "tilt": float(np.degrees(np.arccos(np.clip(d @ axis, -1.0, 1.0)))),
+            "direction": d, "states": model.actuator_states(q)}
 
 
 def stack(maps: list[dict], n_u: int) -> dict:
