@@ -26,6 +26,9 @@ __all__ = [
     "embed",
     "Embedding",
     "load_mesh",
+    "read_meshio",
+    "sniff_format",
+    "transform_points",
     "trunk_mesh",
 ]
 
@@ -46,6 +49,18 @@ class Mesh:
     """Index of each tetrahedron among the file's tetra cells (for error messages)."""
     element: ElementType = TET4
     """The element type of the cells."""
+    file_nodes: np.ndarray | None = field(default=None, repr=False)
+    """Index in the file's point list of each node (a file's unused points are dropped, so a SOFA scene's
+    ``indices`` are mapped through this); None for generated meshes, whose nodes are the file's."""
+
+    def node_of_file_index(self, indices) -> np.ndarray:
+        """Mesh nodes of the file's point indices; -1 where the file point is used by no tetrahedron."""
+        indices = np.asarray(indices, dtype=np.int64)
+        if self.file_nodes is None:
+            return np.where((indices >= 0) & (indices < self.n_nodes), indices, -1)
+        lookup = np.full(max(int(self.file_nodes.max()) + 1, int(indices.max(initial=0)) + 1), -1, dtype=np.int64)
+        lookup[self.file_nodes] = np.arange(self.file_nodes.size)
+        return np.where(indices >= 0, lookup[np.clip(indices, 0, lookup.size - 1)], -1)
 
     @property
     def n_nodes(self) -> int:
@@ -100,22 +115,56 @@ class Mesh:
         return float(np.linalg.norm(self.nodes.max(0) - self.nodes.min(0)))
 
 
-def load_mesh(path: str | Path, scale: float = 1.0) -> Mesh:
-    """Read the tetrahedra of any meshio-readable file; ``scale`` converts its unit to metres (mm: 0.001)."""
+# First bytes of the formats SOFA scenes ship, for files whose extension lies (a SoftRobots tutorial's
+# ``diamond.vtk`` is an XML VTU file): (marker, meshio format name)
+_SIGNATURES = ((b"<?xml", None), (b"<VTKFile", "vtu"), (b"# vtk DataFile", "vtk"), (b"$MeshFormat", "gmsh"),
+               (b"solid", "stl"))
+
+
+def sniff_format(path: str | Path) -> str | None:
+    """The meshio format name a file's content says (``vtu``, ``vtk``, ``gmsh``, ``stl``), or None."""
+    head = Path(path).read_bytes()[:512].lstrip()
+    for marker, name in _SIGNATURES:
+        if head.startswith(marker):
+            if name is None:  # XML: which VTK XML file
+                return "vtu" if b"UnstructuredGrid" in head else ("vtp" if b"PolyData" in head else None)
+            return name
+    return None
+
+
+def read_meshio(path: str | Path):
+    """meshio's reading of a file, by its extension and, if that fails or disagrees with the content, by
+    its content; any failure is a one-line :class:`MeshError` naming the file."""
     import meshio
 
     path = Path(path)
     if not path.is_file():
-        raise MeshError(f"{path}: mesh file not found")
+        raise MeshError(f"{path}: file not found")
+    by_content = sniff_format(path)
+    by_extension = {".vtk": "vtk", ".vtu": "vtu", ".vtp": "vtp", ".msh": "gmsh", ".stl": "stl"}.get(path.suffix.lower())
     chatter = io.StringIO()
-    try:
-        # meshio prints its own complaints ("Illegal VTK header"): the user gets one line from us instead
-        with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
-            m = meshio.read(path)
-    except (Exception, SystemExit) as exc:  # meshio raises many kinds, and exits on some unreadable files
-        text = chatter.getvalue().strip() if isinstance(exc, SystemExit) else str(exc).strip()
-        reason = text.splitlines()[-1] if text else type(exc).__name__
-        raise MeshError(f"{path}: could not be read as a mesh ({reason})") from None
+    formats = [None] if by_content is None or by_content == by_extension else [by_content]
+    if by_content is not None and by_content != by_extension and by_extension is not None:
+        formats = [by_content]  # the content wins over a lying extension
+    last = None
+    for fmt in formats:
+        try:
+            # meshio prints its own complaints ("Illegal VTK header"): the user gets one line from us instead
+            with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
+                return meshio.read(path, file_format=fmt) if fmt else meshio.read(path)
+        except (Exception, SystemExit) as exc:  # meshio raises many kinds, and exits on some unreadable files
+            text = chatter.getvalue().strip() if isinstance(exc, SystemExit) else str(exc).strip()
+            last = text.splitlines()[-1] if text else type(exc).__name__
+    raise MeshError(f"{path}: could not be read as a mesh ({last})")
+
+
+def load_mesh(path: str | Path, scale: float = 1.0, transform=None) -> Mesh:
+    """Read the tetrahedra of any meshio-readable file; ``scale`` converts its unit to metres (mm: 0.001),
+    ``transform`` (a function of (n, 3) points in metres) then places it (:func:`transform_points`)."""
+    path = Path(path)
+    if not path.is_file():
+        raise MeshError(f"{path}: mesh file not found")
+    m = read_meshio(path)
     linear = [c.data for c in m.cells if c.type == "tetra"]
     quad = [c.data for c in m.cells if c.type == "tetra10"]
     if not linear and not quad:
@@ -128,11 +177,31 @@ def load_mesh(path: str | Path, scale: float = 1.0) -> Mesh:
     tets = np.concatenate(quad or linear).astype(np.int64)
     used, inverse = np.unique(tets, return_inverse=True)
     nodes = np.asarray(m.points, dtype=float)[used, :3] * float(scale)
+    if transform is not None:
+        nodes = transform(nodes)
     if not np.all(np.isfinite(nodes)):
         raise MeshError(f"{path}: node coordinates contain NaN or infinite values")
-    mesh = Mesh(nodes, inverse.reshape(tets.shape), str(path), np.arange(tets.shape[0]), element)
+    tets = inverse.reshape(tets.shape)
+    if element is TET4:
+        # a file written with the other orientation convention (or mirrored by a negative scale) has every
+        # tetrahedron negative: turn them all around. A mix of orientations stays an error (check()).
+        X = nodes[tets]
+        V = np.einsum("ij,ij->i", np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), X[:, 3] - X[:, 0])
+        if np.all(V < 0):
+            tets = tets[:, [0, 2, 1, 3]]
+    mesh = Mesh(nodes, tets, str(path), np.arange(tets.shape[0]), element, used)
     mesh.check()
     return mesh
+
+
+def transform_points(points: np.ndarray, rotation=(0.0, 0.0, 0.0), translation=(0.0, 0.0, 0.0),
+                     scale=1.0) -> np.ndarray:
+    """SOFA's loader transform: x' = translation + R (scale * x), R from Euler angles in degrees applied
+    about x, then y, then z (fixed axes; SOFA's ``createQuaterFromEuler``)."""
+    from scipy.spatial.transform import Rotation
+
+    R = Rotation.from_euler("xyz", np.asarray(rotation, dtype=float), degrees=True).as_matrix()
+    return np.asarray(translation, dtype=float) + (np.asarray(points, dtype=float) * scale) @ R.T
 
 
 def quadratic(mesh: Mesh) -> Mesh:
@@ -245,15 +314,20 @@ class Embedding:
                              shape=(3 * k, 3 * mesh.n_nodes))
 
 
-def _distance_to_tet(p: np.ndarray, X: np.ndarray) -> float:
-    """Euclidean distance from p to the solid tetrahedron X (4, 3): min over convex combinations."""
+def closest_point_in_tet(p: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """The point of the solid tetrahedron X (4, 3) nearest to p: min over convex combinations."""
     from scipy.optimize import nnls
 
     big = 1e3 * max(1.0, float(np.abs(X).max()))
     A = np.vstack([X.T, big * np.ones(4)])
     b = np.concatenate([p, [big]])
     lam, _ = nnls(A, b)
-    return float(np.linalg.norm(X.T @ lam - p))
+    return X.T @ lam
+
+
+def _distance_to_tet(p: np.ndarray, X: np.ndarray) -> float:
+    """Euclidean distance from p to the solid tetrahedron X (4, 3)."""
+    return float(np.linalg.norm(closest_point_in_tet(p, X) - p))
 
 
 def embed(mesh: Mesh, points: np.ndarray) -> Embedding:
