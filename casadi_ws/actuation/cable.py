@@ -31,6 +31,9 @@ class Cable(Actuator):
     name: str = "cable"
     stroke_max: float | None = None
     """Largest shortening of the cable from its rest length (the motor's stroke), m; None: unlimited."""
+    nodes: np.ndarray | None = None
+    """Mesh node of each passage point (k,), if the points were given as node indices (SOFA's
+    ``indices``): they then move exactly with those nodes."""
 
     kind = "cable"
     input_unit = "N"
@@ -61,6 +64,7 @@ class Cable(Actuator):
 
     def describe(self) -> dict:
         return {**super().describe(), "stroke_max": self.stroke_max,
+                "nodes": None if self.nodes is None else np.asarray(self.nodes).tolist(),
                 "pull_point": None if self.pull_point is None else np.asarray(self.pull_point, float).tolist()}
 
 

@@ -19,7 +19,8 @@ import numpy as np
 from ..actuation.base import Actuator
 from ..actuation.cable import Cable, trunk_cable
 from ..fem.materials import MATERIAL_MODELS, Material
-from ..fem.mesh import Mesh, MeshError, box_mesh, embed, load_mesh, quadratic, trunk_mesh
+from ..fem.mesh import (Mesh, MeshError, box_mesh, closest_point_in_tet, embed, load_mesh, quadratic,
+                        transform_points, trunk_mesh)
 from ..solvers.admissible import AdmissibilitySettings
 
 __all__ = [
@@ -143,11 +144,13 @@ _TOP_KEYS = {"name", "description", "mesh", "material", "material_regions", "gra
              "cavities", "end_effector", "loads", "solver", "workspace", "task", "admissibility"}
 _MESH_GEN = {"generate", "length", "radius_base", "radius_tip", "resolution", "size", "divisions", "origin",
              "order"}
-_MESH_FILE = {"file", "scale", "units", "order"}
-_MATERIAL = {"model", "young_modulus", "poisson_ratio", "density", "max_stretch"}
+_MESH_FILE = {"file", "scale", "units", "order", "transform"}
+_TRANSFORM = {"rotation", "translation", "scale"}
+_MATERIAL = {"model", "young_modulus", "poisson_ratio", "density", "total_mass", "max_stretch"}
 _REGION = {"box", "young_modulus", "poisson_ratio", "density", "max_stretch"}
-_CABLE = {"name", "points", "pull_point", "trunk_routing", "u_min", "u_max", "stroke_max"}
-_CAVITY = {"name", "surface", "enclosing", "u_min", "u_max", "scale", "volume_max", "volume_max_ratio"}
+_CABLE = {"name", "points", "indices", "pull_point", "trunk_routing", "u_min", "u_max", "stroke_max"}
+_CAVITY = {"name", "surface", "enclosing", "u_min", "u_max", "scale", "transform", "volume_max", "volume_max_ratio",
+           "embed_tolerance"}
 _ADMISSIBILITY = {"stability", "inversion", "self_penetration", "min_det_F", "penetration_depth",
                   "keep_inadmissible"}
 _COMPONENTS = {"x": 0, "y": 1, "z": 2}
@@ -265,8 +268,9 @@ def _read_mesh_cells(r: _Reader, d, base: Path) -> tuple[Mesh, dict]:
         if "scale" in d:
             scale = r.number(d, "scale", "mesh", lo=0.0, lo_open=True)
         path = Path(f) if Path(f).is_absolute() else base / f
+        transform = _read_transform(r, d.get("transform"), "mesh.transform")
         try:
-            return load_mesh(path, scale), {}
+            return load_mesh(path, scale, transform), {}
         except MeshError as exc:
             r.fail("mesh.file", str(exc))
     r.mapping(d, "mesh", _MESH_GEN)
@@ -274,6 +278,21 @@ def _read_mesh_cells(r: _Reader, d, base: Path) -> tuple[Mesh, dict]:
         return _generate_mesh(r, d)
     except MeshError as exc:  # e.g. a box so flat that its tetrahedra are degenerate
         r.fail("mesh", str(exc))
+
+
+def _read_transform(r: _Reader, d, key: str):
+    """``transform: {rotation: [rx, ry, rz] (degrees), translation: [x, y, z] (m), scale: s or [sx, sy, sz]}``
+    (SOFA's loader data) as a function of (n, 3) points in metres, or None."""
+    if d is None:
+        return None
+    r.mapping(d, key, _TRANSFORM)
+    rotation = r.vector(d.get("rotation", [0, 0, 0]), f"{key}.rotation")
+    translation = r.vector(d.get("translation", [0, 0, 0]), f"{key}.translation")
+    sc = d.get("scale", 1.0)
+    scale = r.vector(sc, f"{key}.scale") if isinstance(sc, (list, tuple)) else r.number(d, "scale", key, 1.0)
+    if np.any(np.asarray(scale) == 0):
+        r.fail(f"{key}.scale", f"must not be zero, got {sc!r}")
+    return lambda x: transform_points(x, rotation, translation, scale)
 
 
 def _generate_mesh(r: _Reader, d) -> tuple[Mesh, dict]:
@@ -351,17 +370,21 @@ def _read_selection(r: _Reader, d, mesh: Mesh, key: str, alone: bool):
         comps = tuple(sorted({_COMPONENTS[c] for c in comps_raw}))
     else:
         comps = (0, 1, 2)
-    if not isinstance(d, dict) or len(d) != 1 or next(iter(d)) not in ("box", "plane"):
-        r.fail(key, f"expected exactly one of 'box: [[xmin, ymin, zmin], [xmax, ymax, zmax]]' or "
-                    f"'plane: {{point, normal, tolerance}}' (and optionally 'components'), got {d!r}")
+    kinds = ("box", "plane", "sphere", "indices")
+    if not isinstance(d, dict) or len(d) != 1 or next(iter(d)) not in kinds:
+        r.fail(key, f"expected exactly one of 'box: [[xmin, ymin, zmin], [xmax, ymax, zmax]]' (or six numbers), "
+                    f"'plane: {{point, normal, tolerance}}', 'sphere: {{center, radius}}' or 'indices: [...]' "
+                    f"(and optionally 'components'), got {d!r}")
     if "box" in d:
-        b = d["box"]
-        if not isinstance(b, (list, tuple)) or len(b) != 2:
-            r.fail(f"{key}.box", f"expected [[xmin, ymin, zmin], [xmax, ymax, zmax]], got {b!r}")
-        lo, hi = r.vector(b[0], f"{key}.box[0]"), r.vector(b[1], f"{key}.box[1]")
-        if np.any(lo > hi):
-            r.fail(f"{key}.box", f"lower corner {lo.tolist()} exceeds upper corner {hi.tolist()}")
+        lo, hi = _read_box(r, d["box"], f"{key}.box")
         nodes, key = nodes_in_box(mesh, lo, hi), f"{key}.box"
+    elif "sphere" in d:
+        b = r.mapping(d["sphere"], f"{key}.sphere", {"center", "radius"})
+        center = r.vector(b.get("center"), f"{key}.sphere.center")
+        radius = r.number(b, "radius", f"{key}.sphere", lo=0.0, lo_open=True)
+        nodes, key = np.flatnonzero(np.linalg.norm(mesh.nodes - center, axis=1) <= radius), f"{key}.sphere"
+    elif "indices" in d:
+        nodes, key = _read_indices(r, d["indices"], mesh, f"{key}.indices"), f"{key}.indices"
     else:
         p = r.mapping(d["plane"], f"{key}.plane", {"point", "normal", "tolerance"})
         point = r.vector(p.get("point"), f"{key}.plane.point")
@@ -379,6 +402,37 @@ def _read_selection(r: _Reader, d, mesh: Mesh, key: str, alone: bool):
         if nodes.size < 3 or sv[1] <= 1e-6 * mesh.characteristic_length():
             r.fail(key, f"selects {nodes.size} node(s) on a line or fewer: they do not prevent rigid motion")
     return nodes, comps
+
+
+def _read_box(r: _Reader, b, key: str) -> tuple[np.ndarray, np.ndarray]:
+    """A box as ``[[xmin, ymin, zmin], [xmax, ymax, zmax]]`` or SOFA's six numbers
+    ``[xmin, ymin, zmin, xmax, ymax, zmax]``."""
+    if isinstance(b, (list, tuple)) and len(b) == 6:
+        v = r.vector(b, key, 6)
+        lo, hi = v[:3], v[3:]
+    elif isinstance(b, (list, tuple)) and len(b) == 2:
+        lo, hi = r.vector(b[0], f"{key}[0]"), r.vector(b[1], f"{key}[1]")
+    else:
+        r.fail(key, f"expected [[xmin, ymin, zmin], [xmax, ymax, zmax]] or [xmin, ymin, zmin, xmax, ymax, zmax], "
+                    f"got {b!r}")
+    if np.any(lo > hi):
+        r.fail(key, f"lower corner {lo.tolist()} exceeds upper corner {hi.tolist()}")
+    return lo, hi
+
+
+def _read_indices(r: _Reader, v, mesh: Mesh, key: str) -> np.ndarray:
+    """Point indices of the mesh file (SOFA's ``indices``), as mesh nodes; each must be a point some
+    tetrahedron uses."""
+    if not isinstance(v, (list, tuple)) or not v or \
+            any(isinstance(i, bool) or not isinstance(i, int) or i < 0 for i in v):
+        r.fail(key, f"expected a non-empty list of non-negative integers, got {v!r}")
+    nodes = mesh.node_of_file_index(v)
+    bad = np.flatnonzero(nodes < 0)
+    if bad.size:
+        n_points = mesh.n_nodes if mesh.file_nodes is None else int(mesh.file_nodes.max()) + 1
+        r.fail(f"{key}[{int(bad[0])}]", f"index {v[int(bad[0])]} is not a node of the mesh (the mesh has "
+                                        f"{mesh.n_nodes} nodes used by tetrahedra, file points 0..{n_points - 1})")
+    return nodes
 
 
 def _read_cavities(r: _Reader, lst, mesh: Mesh, base: Path) -> list:
@@ -403,7 +457,9 @@ def _read_cavities(r: _Reader, lst, mesh: Mesh, base: Path) -> list:
                 if not path.is_file():
                     r.fail(f"{key}.surface", f"file not found: {path}")
                 scale = r.number(c, "scale", key, 1.0, lo=0.0, lo_open=True)
-                cav = cavity_from_surface(mesh, path, name, u_min, u_max, scale)
+                transform = _read_transform(r, c.get("transform"), f"{key}.transform")
+                tol = r.optional(c, "embed_tolerance", key, lo=0.0)
+                cav = cavity_from_surface(mesh, path, name, u_min, u_max, scale, transform, tol)
             else:
                 if "scale" in c:
                     r.fail(f"{key}.scale", "only a surface file has a scale")
@@ -449,13 +505,19 @@ def _read_cables(r: _Reader, lst, mesh: Mesh) -> list[Cable]:
             cable = trunk_cable(kind=kind, u_min=u_min, u_max=u_max, name=name,
                                 **{"angle_deg": 0.0, **opts})
         else:
-            if "points" not in c:
-                r.fail(f"{key}.points", "missing: give the passage points or a 'trunk_routing'")
-            pts = r.points(c["points"], f"{key}.points")
+            if ("points" in c) == ("indices" in c):
+                r.fail(f"{key}.points", "give the passage points, their mesh node 'indices' or a 'trunk_routing'"
+                       if "points" not in c else "give either 'points' or 'indices', not both")
+            nodes = None
+            if "indices" in c:
+                nodes = _read_indices(r, c["indices"], mesh, f"{key}.indices")
+                pts = mesh.nodes[nodes]
+            else:
+                pts = r.points(c["points"], f"{key}.points")
             pull = r.vector(c["pull_point"], f"{key}.pull_point") if c.get("pull_point") is not None else None
             if len(pts) < 2 and pull is None:
                 r.fail(f"{key}.points", "a cable needs at least two points, or one point and a pull_point")
-            cable = Cable(pts, pull, u_min, u_max, name)
+            cable = Cable(pts, pull, u_min, u_max, name, nodes=nodes)
         emb = embed(mesh, cable.points)
         far = np.flatnonzero(emb.outside > MAX_OUTSIDE_RELATIVE * size)
         if far.size:
@@ -467,11 +529,49 @@ def _read_cables(r: _Reader, lst, mesh: Mesh) -> list[Cable]:
     return cables
 
 
-def tip_centre(mesh: Mesh) -> np.ndarray:
-    """Centre of the mesh's top face along +z: mean x, y of the nodes at the largest z."""
-    z = mesh.nodes[:, 2]
-    top = mesh.nodes[z >= z.max() - 1e-6 * mesh.characteristic_length()]
-    return np.array([top[:, 0].mean(), top[:, 1].mean(), z.max()])
+def tip_centre(mesh: Mesh, axis: str = "+z") -> np.ndarray:
+    """Centre of the mesh's end face along ``axis`` (``+z``, ``-x``, ...): the mean of the nodes farthest
+    along it."""
+    sign = -1.0 if axis.startswith("-") else 1.0
+    c = _COMPONENTS[axis[-1]]
+    h = sign * mesh.nodes[:, c]
+    top = mesh.nodes[h >= h.max() - 1e-6 * mesh.characteristic_length()]
+    out = top.mean(axis=0)
+    out[c] = mesh.nodes[np.argmax(h), c]
+    return out
+
+
+_AXES = ("x", "y", "z", "+x", "+y", "+z", "-x", "-y", "-z")
+
+
+def _read_end_effector(r: _Reader, ee, mesh: Mesh) -> np.ndarray:
+    """``end_effector``: ``tip`` (the +z end), ``{tip: {axis: -x}}``, a point ``[x, y, z]`` inside the mesh, or
+    ``{point: [x, y, z], snap: distance}`` (a point up to ``snap`` metres outside, moved onto the mesh: a
+    SOFA effector often sits on the surface, a rounding away from it)."""
+    snap = 0.0
+    if ee == "tip":
+        return tip_centre(mesh)
+    if isinstance(ee, dict) and "tip" in ee:
+        r.mapping(ee, "end_effector", {"tip"})
+        t = r.mapping(ee["tip"], "end_effector.tip", {"axis"})
+        axis = str(t.get("axis", "+z"))
+        if axis not in _AXES:
+            r.fail("end_effector.tip.axis", f"expected one of {', '.join(_AXES)}, got {axis!r}")
+        return tip_centre(mesh, axis)
+    if isinstance(ee, dict):
+        r.mapping(ee, "end_effector", {"point", "snap"})
+        point = r.vector(ee.get("point"), "end_effector.point")
+        snap = r.number(ee, "snap", "end_effector", 0.0, lo=0.0)
+    else:
+        point = r.vector(ee, "end_effector")
+    emb = embed(mesh, point[None])
+    out = emb.outside[0]
+    if out > max(snap, 1e-6 * mesh.characteristic_length()):
+        r.fail("end_effector", f"point {point.tolist()} lies {out:.4g} m outside the mesh"
+               + (f" (snap allows {snap:.4g} m)" if snap else " (give {point, snap} to move it onto the mesh)"))
+    if out > 0:
+        point = closest_point_in_tet(point, mesh.nodes[mesh.corners[emb.tet[0]]])
+    return point
 
 
 def _read_regions(r: _Reader, lst, mesh: Mesh, material: Material) -> list:
@@ -484,10 +584,7 @@ def _read_regions(r: _Reader, lst, mesh: Mesh, material: Material) -> list:
     for i, g in enumerate(lst):
         key = f"material_regions[{i}]"
         r.mapping(g, key, _REGION)
-        b = g.get("box")
-        if not isinstance(b, (list, tuple)) or len(b) != 2:
-            r.fail(f"{key}.box", f"expected [[xmin, ymin, zmin], [xmax, ymax, zmax]], got {b!r}")
-        lo, hi = r.vector(b[0], f"{key}.box[0]"), r.vector(b[1], f"{key}.box[1]")
+        lo, hi = _read_box(r, g.get("box"), f"{key}.box")
         tets = np.flatnonzero(np.all((centroids >= lo) & (centroids <= hi), axis=1))
         if tets.size == 0:
             r.fail(f"{key}.box", "holds the centroid of no tetrahedron")
@@ -559,25 +656,23 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
         close = difflib.get_close_matches(str(model), MATERIAL_MODELS, n=1)
         r.fail("material.model", f"expected one of {', '.join(MATERIAL_MODELS)}, got {model!r}"
                + (f" (did you mean '{close[0]}'?)" if close else ""))
+    if "density" in m and "total_mass" in m:
+        r.fail("material.total_mass", "give density (kg/m^3) or total_mass (kg), not both")
+    density = r.number(m, "density", "material", 1000.0, lo=0.0)
+    if "total_mass" in m:
+        # SOFA's UniformMass totalMass: spread here by volume (a consistent mass), not equally per node
+        density = r.number(m, "total_mass", "material", lo=0.0) / float(mesh.volumes().sum())
     material = Material(model,
                         r.number(m, "young_modulus", "material", lo=0.0, lo_open=True),
                         r.number(m, "poisson_ratio", "material", lo=-1.0, hi=0.5, lo_open=True, hi_open=True),
-                        r.number(m, "density", "material", 1000.0, lo=0.0),
-                        _max_stretch(r, m, "material", None))
+                        density, _max_stretch(r, m, "material", None))
     regions = _read_regions(r, d.get("material_regions"), mesh, material)
     gravity = r.vector(d["gravity"], "gravity") if d.get("gravity") is not None else np.zeros(3)
     fixed, partial_fixed = _read_fixed(r, d["fixed"], mesh)
     cables = _read_cables(r, d["cables"], mesh) if "cables" in d else []
     cavities = _read_cavities(r, d["cavities"], mesh, base) if "cavities" in d else []
 
-    ee = d.get("end_effector", "tip")
-    if ee == "tip":
-        end_effector = tip_centre(mesh)
-    else:
-        end_effector = r.vector(ee, "end_effector")
-    out = embed(mesh, end_effector[None]).outside[0]
-    if out > 1e-6 * mesh.characteristic_length():
-        r.fail("end_effector", f"point {end_effector.tolist()} lies {out:.4g} m outside the mesh")
+    end_effector = _read_end_effector(r, d.get("end_effector", "tip"), mesh)
 
     loads = []
     lst = d.get("loads") or []
