@@ -242,6 +242,22 @@ def cmd_boundary(args) -> int:
     return 0
 
 
+def cmd_import_sofa(args) -> int:
+    from .io.sofa import import_scene
+
+    scene = Path(args.scene)
+    if scene.suffix.lower() not in (".py", ".pyscn", ".scn"):
+        raise UsageError(f"{scene}: expected a SOFA scene (.py, .pyscn or .scn), got {scene.suffix or 'no extension'}")
+    out = Path(args.out) if args.out else scene.with_suffix(".yaml")
+    tr = import_scene(scene, out, args.units)
+    print(f"wrote {out} ({tr.units} -> SI)")
+    for line in tr.notes:
+        print(f"  note: {line}")
+    for line in tr.untranslated:
+        print(f"  not translated: {line}")
+    return 0
+
+
 def cmd_report(args) -> int:
     from .io.report import write_report
     from .workspace.result import load_result
@@ -449,6 +465,14 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--problem", default=None, help="the problem file (default: the one named in summary.json)")
     b.set_defaults(func=cmd_boundary)
 
+    im = sub.add_parser("import-sofa", help="write a problem file from a SOFA scene (runs the scene's createScene "
+                                            "against a recording stand-in of SOFA's Python API)")
+    im.add_argument("scene", help="the scene: .py / .pyscn (Python, executed) or .scn (XML)")
+    im.add_argument("--out", default=None, help="the problem file to write (SCENE.yaml)")
+    im.add_argument("--units", default=None, help="the scene's unit system: m-kg-s, mm-kg-s, mm-g-s, cm-kg-s "
+                                                  "(default: from gravity's magnitude)")
+    im.set_defaults(func=cmd_import_sofa)
+
     rp = sub.add_parser("report", help="an interactive HTML page of a result (self-contained, works offline)")
     rp.add_argument("result", help="result directory")
     rp.add_argument("--out", default=None, help="the page to write (RESULT/report.html)")
@@ -501,11 +525,12 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     from .fem.mesh import MeshError
     from .io.problem import ProblemError
+    from .io.sofa.recorder import SceneError
 
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ProblemError, MeshError, UsageError) as exc:
+    except (ProblemError, MeshError, UsageError, SceneError) as exc:
         if args.debug:
             raise
         print(f"casadi-ws: error: {exc}", file=sys.stderr)

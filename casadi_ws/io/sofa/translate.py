@@ -1,0 +1,587 @@
+"""Translate a recorded SOFA scene graph (:mod:`.recorder`) into a casadi-ws problem, in SI units.
+
+The rules, one per SOFA component (docs/sofa.md lists them with what each becomes):
+
+- the body is the node holding a ``TetrahedronFEMForceField`` (or ``TetrahedronHyperelasticityFEMForceField``);
+  its mesh comes from the node's mesh loader (``MeshVTKLoader``, ``MeshGmshLoader``, ...), placed by the
+  loader's ``rotation``/``translation``/``scale``/``scale3d``;
+- fixed nodes: ``FixedConstraint``/``FixedProjectiveConstraint`` indices, ``RestShapeSpringsForceField``
+  points, ``PartialFixed(Projective)Constraint`` with its directions; indices given as a link to a
+  ``BoxROI``/``SphereROI`` are selected here as SOFA would (bounds inclusive, in the scene's units);
+- cables: a ``CableConstraint``/``CableActuator`` on the points of its node's ``MechanicalObject``
+  (``indices``, ``pullPoint``, ``hasPullPoint``), bounds from ``minForce``/``maxForce`` or, displacement
+  controlled, from ``maxPositiveDisp`` (see :func:`translate`);
+- cavities: a ``SurfacePressureConstraint`` on its node's surface loader (vertices embedded like SOFA's
+  barycentric mapping), bounds ``minPressure``/``maxPressure``;
+- the end effector: the first ``PositionEffector`` point, else the centre of the body's far end;
+- mass: ``UniformMass`` ``totalMass``/``vertexMass``, ``MeshMatrixMass``/``DiagonalMass`` ``massDensity``;
+- units: from gravity's magnitude (9.81: m-kg-s, 9810: mm-kg-s) unless given.
+
+Everything else is listed, one line per component type, as not translated.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .recorder import Data, Node, Object, SceneError, record
+
+__all__ = ["UNIT_SYSTEMS", "Translation", "import_scene", "translate"]
+
+UNIT_SYSTEMS = {"m-kg-s": (1.0, 1.0), "mm-kg-s": (1e-3, 1.0), "mm-g-s": (1e-3, 1e-3), "cm-kg-s": (1e-2, 1.0)}
+"""Unit systems of SOFA scenes: (metres per length unit, kilograms per mass unit); seconds throughout."""
+
+_LOADERS = ("MeshVTKLoader", "MeshGmshLoader", "MeshSTLLoader", "MeshOBJLoader", "MeshExtendedVTKLoader",
+            "MeshXspLoader", "MeshOffLoader", "GIDMeshLoader", "MeshGmshLoader")
+_FEM = ("TetrahedronFEMForceField", "TetrahedronHyperelasticityFEMForceField", "FastTetrahedralCorotationalForceField",
+        "TetrahedralCorotationalFEMForceField")
+_CABLES = ("CableConstraint", "CableActuator")
+_CAVITIES = ("SurfacePressureConstraint", "SurfacePressureActuator")
+_FIXED = ("FixedConstraint", "FixedProjectiveConstraint", "RestShapeSpringsForceField",
+          "PartialFixedConstraint", "PartialFixedProjectiveConstraint")
+_MASSES = ("UniformMass", "MeshMatrixMass", "DiagonalMass")
+# components whose content is translated through another (a topology read by the body, a mapping that
+# embeds a cable's points, a selection a constraint links to)
+_ABSORBED = ("MechanicalObject", "MeshTopology", "TetrahedronSetTopologyContainer", "TetrahedronSetTopologyModifier",
+             "TetrahedronSetGeometryAlgorithms", "TriangleSetTopologyContainer", "BarycentricMapping", "BoxROI",
+             "SphereROI", "PositionEffector", "RequiredPlugin") + _LOADERS
+_KINDS = (
+    ("dynamics or solver (casadi-ws solves the static equilibrium itself)",
+     ("Solver", "AnimationLoop", "ConstraintCorrection", "ODESolver")),
+    ("visual only", ("Ogl", "Visual", "Light", "Camera", "BackgroundSetting", "SceneFrame")),
+    ("collision and contact (not modelled yet)", ("Collision", "Contact", "Pipeline", "Intersection",
+                                                  "BroadPhase", "NarrowPhase", "BruteForce")),
+)
+
+
+@dataclass
+class Translation:
+    """What :func:`translate` made of a scene: the problem as plain data, and what it says about it."""
+
+    problem: dict
+    """The problem file's content (SI units), as :func:`casadi_ws.io.problem.problem_from_dict` reads it."""
+    comments: dict = field(default_factory=dict)
+    """Comment for a top-level key or a list entry (``cables[0]``), for the written file."""
+    notes: list[str] = field(default_factory=list)
+    """What was translated approximately or assumed, one line each."""
+    untranslated: list[str] = field(default_factory=list)
+    """What was not translated, one line per component type."""
+    units: str = "m-kg-s"
+
+
+def _flat_points(v) -> np.ndarray:
+    """SOFA's vector data: a flat or nested list of numbers (SofaPython3 flattens), as (n, 3)."""
+    if isinstance(v, Data):
+        v = v.value
+    if isinstance(v, str):
+        v = [float(x) for x in v.replace(",", " ").split()]
+    flat = []
+
+    def walk(x):
+        if isinstance(x, (list, tuple, np.ndarray)):
+            for y in x:
+                walk(y)
+        else:
+            flat.append(float(x))
+
+    walk(v)
+    if len(flat) % 3:
+        raise ValueError(f"{len(flat)} numbers are not a list of 3-D points")
+    return np.asarray(flat, dtype=float).reshape(-1, 3)
+
+
+def _ints(v) -> list[int]:
+    if isinstance(v, str):
+        v = v.replace(",", " ").split()
+    if isinstance(v, (int, float)):
+        v = [v]
+    return [int(float(x)) for x in np.asarray(v, dtype=object).ravel()]
+
+
+def _bool(v, default: bool) -> bool:
+    if v is None:
+        return default
+    if isinstance(v, str):
+        return v.strip().lower() not in ("0", "false", "no", "")
+    return bool(v)
+
+
+def _num(v, default=None):
+    if v is None:
+        return default
+    if isinstance(v, str):
+        v = float(v.split()[0])
+    if isinstance(v, (list, tuple)):
+        v = v[0]
+    return float(v)
+
+
+class _Scene:
+    def __init__(self, root: Node, path: Path):
+        self.root, self.path, self.dir = root, path, path.resolve().parent
+        self.nodes = list(root.walk())
+
+    def fail(self, message: str):
+        raise SceneError(f"{self.path}: {message}")
+
+    def find(self, link, here: Node) -> Object | None:
+        """The object a link names (``@name``, ``@name.data``, ``@../name``, ``@/a/b/name``)."""
+        if isinstance(link, Data):
+            return link.owner if isinstance(link.owner, Object) else None
+        if not isinstance(link, str) or not link.startswith("@"):
+            return None
+        target = link[1:].split(".")[0]
+        parts = [p for p in target.split("/") if p]
+        node = self.root if target.startswith("/") else here
+        for p in parts[:-1]:
+            node = node.parent if p == ".." else (node.getChild(p) if p != "." else node)
+            if node is None:
+                return None
+        name = parts[-1] if parts else ""
+        for n in [node] + ([] if target.startswith("/") or len(parts) > 1 else list(_ancestors(node))):
+            o = n.getObject(name)
+            if o is not None:
+                return o
+        return None
+
+
+def _ancestors(node: Node):
+    while node.parent is not None:
+        node = node.parent
+        yield node
+
+
+def _objects(node: Node, types: tuple) -> list[Object]:
+    return [o for o in node.objects if o.type in types]
+
+
+def _loader_points(scene: _Scene, loader: Object, length: float):
+    """The points (scene units, transformed as the loader says) and the file of a mesh loader."""
+    from ...fem.mesh import read_meshio
+
+    f = loader.data.get("filename")
+    if not f:
+        scene.fail(f"{loader.type} '{loader.name}' at {loader.path()} has no filename")
+    file = Path(str(f))
+    file = file if file.is_absolute() else scene.dir / file
+    if not file.is_file():
+        scene.fail(f"{loader.type} '{loader.name}': mesh file not found: {file}")
+    m = read_meshio(file)
+    return np.asarray(m.points, float)[:, :3], file, _transform(loader), m
+
+
+def _transform(loader: Object) -> dict:
+    """The loader's placement as the problem format's ``transform`` (scale dimensionless, translation in
+    scene units until converted)."""
+    t = {}
+    rot = loader.data.get("rotation")
+    if rot is not None and np.any(_flat_points(rot)):
+        t["rotation"] = _flat_points(rot)[0].tolist()
+    tr = loader.data.get("translation")
+    if tr is not None and np.any(_flat_points(tr)):
+        t["translation"] = _flat_points(tr)[0].tolist()
+    sc = loader.data.get("scale3d", loader.data.get("scale"))
+    if sc is not None:
+        s = np.atleast_1d(np.asarray(_flat_points(sc) if np.size(sc) == 3 else [_num(sc)], dtype=float)).ravel()
+        if np.any(s != 1.0):
+            t["scale"] = float(s[0]) if s.size == 1 or np.all(s == s[0]) else s.tolist()
+    return t
+
+
+def _apply(t: dict, x: np.ndarray) -> np.ndarray:
+    from ...fem.mesh import transform_points
+
+    return transform_points(x, t.get("rotation", (0, 0, 0)), t.get("translation", (0, 0, 0)), t.get("scale", 1.0))
+
+
+def _units(scene: _Scene, units: str | None, notes: list) -> str:
+    g = scene.root.data.get("gravity")
+    if units is not None:
+        if units not in UNIT_SYSTEMS:
+            scene.fail(f"--units: expected one of {', '.join(UNIT_SYSTEMS)}, got {units!r}")
+        return units
+    if g is None:
+        notes.append("gravity is not set: SOFA's default (0, -9.81, 0) and units m-kg-s assumed (--units to change)")
+        return "m-kg-s"
+    mag = float(np.linalg.norm(_flat_points(g)[0]))
+    for name, expect in (("m-kg-s", 9.81), ("mm-kg-s", 9810.0), ("cm-kg-s", 981.0)):
+        if abs(mag - expect) <= 0.02 * expect:
+            notes.append(f"units {name} (from gravity's magnitude {mag:g}); masses read as "
+                         f"{'kg' if UNIT_SYSTEMS[name][1] == 1 else 'g'} (--units mm-g-s if the scene uses grams)")
+            return name
+    scene.fail(f"cannot tell the units from gravity's magnitude {mag:g} (9.81: m, 9810: mm); give --units")
+
+
+def translate(path: str | Path, units: str | None = None, out_dir: str | Path | None = None,
+              compliance_bounds: bool = True) -> Translation:
+    """The problem a SOFA scene describes (see the module's docstring for the rules).
+
+    ``out_dir``: where the problem file will live (its mesh paths are written relative to it).
+    Displacement-controlled cables (SOFA's default ``valueType``) become tension-controlled here: with
+    ``compliance_bounds`` the tension bound is the one that shortens the cable by ``maxPositiveDisp`` in the
+    linear model at rest (one factorisation), and a note says so.
+    """
+    path = Path(path)
+    scene = _Scene(record(path), path)
+    out_dir = Path(out_dir) if out_dir is not None else Path.cwd()
+    tr = Translation({}, units="")
+    notes = tr.notes
+    tr.units = _units(scene, units, notes)
+    L, M = UNIT_SYSTEMS[tr.units]
+    force, stress = M * L, M / L  # N per force unit, Pa per stress unit
+    used: set[int] = set()
+
+    bodies = [n for n in scene.nodes if _objects(n, _FEM)]
+    if not bodies:
+        scene.fail("no node holds a TetrahedronFEMForceField (or TetrahedronHyperelasticityFEMForceField): no "
+                   "deformable body to translate")
+    body = bodies[0]
+    if len(bodies) > 1:
+        notes.append(f"{len(bodies)} deformable bodies; translated the first, {body.path()} (the others: "
+                     f"{', '.join(b.path() for b in bodies[1:])})")
+    loaders = [o for o in body.objects if o.type in _LOADERS and o.data.get("filename")]
+    if not loaders:
+        scene.fail(f"body node {body.path()} has no mesh loader with a filename")
+    loader = loaders[0]
+    pts, mesh_file, transform, raw = _loader_points(scene, loader, L)
+    in_tets = np.zeros(len(pts), bool)
+    for c in raw.cells:
+        if c.type in ("tetra", "tetra10"):
+            in_tets[np.asarray(c.data).ravel()] = True
+    used.add(id(loader))
+    rel = os.path.relpath(mesh_file.resolve(), out_dir.resolve())
+    mesh = {"file": rel, "scale": L}
+    if transform:
+        t = dict(transform)
+        if "translation" in t:
+            t["translation"] = [x * L for x in t["translation"]]
+        mesh["transform"] = t
+    tr.problem["name"] = path.stem
+    tr.problem["description"] = f"Imported from the SOFA scene {path.name} by casadi-ws import-sofa."
+    tr.problem["mesh"] = mesh
+    tr.comments["mesh"] = f"{loader.type} '{loader.name}' ({tr.units.split('-')[0]} -> m)"
+    X = _apply(transform, pts) if transform else pts  # scene units, as SOFA's MechanicalObject holds them
+
+    # --- material
+    fem = _objects(body, _FEM)[0]
+    used.add(id(fem))
+    if fem.type == "TetrahedronHyperelasticityFEMForceField":
+        law = str(fem.data.get("materialName", "NeoHookean"))
+        if law.lower() not in ("neohookean", "stablenehookean", "stableneohookean"):
+            scene.fail(f"{fem.type} materialName {law!r}: only NeoHookean is available here")
+        ps = fem.data.get("ParameterSet")
+        p = np.asarray([float(x) for x in ps.replace(",", " ").split()] if isinstance(ps, str)
+                       else np.ravel(ps if ps is not None else []), dtype=float)
+        if p.size < 2 or np.any(p[:2] <= 0):
+            scene.fail(f"{fem.type} '{fem.name}': ParameterSet {ps!r}: expected mu and K, both > 0")
+        mu, K = p[0] * stress, p[1] * stress
+        E, nu = 9 * K * mu / (3 * K + mu), (3 * K - 2 * mu) / (2 * (3 * K + mu))
+        material = {"model": "neohookean", "young_modulus": float(f"{E:.6g}"), "poisson_ratio": float(f"{nu:.6g}")}
+        tr.comments["material"] = f"{fem.type} NeoHookean mu = {p[0]:g}, K = {p[1]:g}"
+    else:
+        method = str(fem.data.get("method", "large"))
+        model = "linear" if method == "small" else "corotational"
+        E = _num(fem.data.get("youngModulus"), 5000.0)
+        nu = _num(fem.data.get("poissonRatio"), 0.45)
+        if isinstance(fem.data.get("youngModulus"), (list, tuple)) and len(fem.data["youngModulus"]) > 1:
+            notes.append(f"{fem.name}: youngModulus per element; the first value, {E:g}, is used for the body")
+        if fem.type != "TetrahedronFEMForceField":
+            notes.append(f"{fem.type} translated as a corotational law")
+        material = {"model": model, "young_modulus": float(f"{E * stress:.6g}"), "poisson_ratio": nu}
+        tr.comments["material"] = (f"{fem.type} method {method!r} -> {model}; youngModulus {E:g} "
+                                   f"({'kPa' if stress == 1e3 else f'x {stress:g} Pa'})")
+    masses = _objects(body, _MASSES)
+    if masses:
+        mass = masses[0]
+        used.add(id(mass))
+        if mass.data.get("totalMass") is not None:
+            material["total_mass"] = _num(mass.data["totalMass"]) * M
+        elif mass.data.get("vertexMass") is not None:
+            material["total_mass"] = _num(mass.data["vertexMass"]) * M * len(pts)
+        elif mass.data.get("massDensity") is not None:
+            material["density"] = _num(mass.data["massDensity"]) * M / L ** 3
+        if mass.type == "UniformMass":
+            notes.append("UniformMass: its total mass is spread by volume (a consistent mass), not equally per node")
+    tr.problem["material"] = material
+
+    g = scene.root.data.get("gravity")
+    tr.problem["gravity"] = (_flat_points(g)[0] * L if g is not None else np.array([0, -9.81, 0])).tolist()
+
+    # --- fixed nodes
+    fixed = []
+    for o in _objects(body, _FIXED):
+        used.add(id(o))
+        key = "points" if o.type == "RestShapeSpringsForceField" else "indices"
+        sel = o.data.get(key)
+        idx, how = _selection(scene, body, sel, X, used)
+        if idx is not None:
+            idx = [k for k in idx if k < len(in_tets) and in_tets[k]]  # SOFA also holds points no tet uses
+        if idx is None:
+            if sel is None and o.type == "RestShapeSpringsForceField":
+                scene.fail(f"{o.type} '{o.name}' holds every node (no points): nothing would move")
+            scene.fail(f"{o.type} '{o.name}': cannot resolve its {key} {sel!r}")
+        entry = {"indices": idx}
+        dirs = o.data.get("fixedDirections")
+        if o.type.startswith("PartialFixed") and dirs is not None:
+            comps = [c for c, d in zip("xyz", _ints(dirs)) if d]
+            if comps != ["x", "y", "z"]:
+                entry["components"] = comps
+        if o.type == "RestShapeSpringsForceField":
+            notes.append(f"{o.type} '{o.name}' (stiffness {o.data.get('stiffness', '?')}) translated as fixed nodes")
+        fixed.append((entry, f"{o.type} '{o.name}': {how}"))
+    if not fixed:
+        scene.fail(f"no FixedConstraint, RestShapeSpringsForceField or PartialFixedConstraint on {body.path()}: the "
+                   f"body is not held")
+    tr.problem["fixed"] = [e for e, _ in fixed]
+    for i, (_, c) in enumerate(fixed):
+        tr.comments[f"fixed[{i}]"] = c
+
+    # --- actuators
+    cables, cavities, disp = [], [], []
+    for node in scene.nodes:
+        for o in _objects(node, _CABLES):
+            used.add(id(o))
+            cables.append(_cable(scene, node, o, body, X, L, force, notes, tr, len(cables), used, disp))
+        for o in _objects(node, _CAVITIES):
+            used.add(id(o))
+            cavities.append(_cavity(scene, node, o, L, stress, notes, tr, len(cavities), out_dir, used))
+    if not cables and not cavities:
+        scene.fail("no CableConstraint or SurfacePressureConstraint: nothing actuates the robot")
+    if cables:
+        tr.problem["cables"] = cables
+    if cavities:
+        tr.problem["cavities"] = cavities
+
+    # --- end effector
+    eff = [(n, o) for n in scene.nodes for o in _objects(n, ("PositionEffector",))]
+    if eff:
+        n, o = eff[0]
+        mo = _objects(n, ("MechanicalObject",))
+        p = _flat_points(mo[0].data.get("position"))[_ints(o.data.get("indices", [0]))[0]] if mo else None
+        if p is not None:
+            size = float(np.linalg.norm(X.max(0) - X.min(0)))
+            tr.problem["end_effector"] = {"point": (p * L).tolist(), "snap": 0.01 * size * L}
+            tr.comments["end_effector"] = f"PositionEffector '{o.name}' (moved onto the mesh if within 1 % of its size)"
+    if "end_effector" not in tr.problem:
+        held = [np.asarray(e["indices"]) for e, _ in fixed if "components" not in e] or \
+            [np.asarray(e["indices"]) for e, _ in fixed]
+        axis = _far_axis(X, np.unique(np.concatenate(held)))
+        tr.problem["end_effector"] = {"tip": {"axis": axis}}
+        tr.comments["end_effector"] = f"no PositionEffector: the centre of the body's end farthest from its support ({axis})"
+
+    # --- what was not translated
+    tr.untranslated = _leftovers(scene, used)
+    from ..problem import ProblemError, problem_from_dict
+
+    try:  # the file written must load: a rule that made a bad problem is the importer's bug, said as such
+        problem = problem_from_dict(tr.problem, f"{path} (translated)", out_dir)
+    except ProblemError as exc:
+        scene.fail(f"the translated problem is invalid: {exc.key}: {exc.message}")
+    if disp and compliance_bounds:
+        _compliance_bounds(tr, disp, problem)
+    return tr
+
+
+def _far_axis(X: np.ndarray, fixed_idx: np.ndarray) -> str:
+    d = X.mean(0) - X[fixed_idx].mean(0)
+    c = int(np.argmax(np.abs(d)))
+    return ("+" if d[c] >= 0 else "-") + "xyz"[c]
+
+
+def _selection(scene: _Scene, body: Node, sel, X: np.ndarray, used: set):
+    """(file point indices, how they were chosen) of a constraint's ``indices``/``points``: a list, or a
+    link to a BoxROI/SphereROI evaluated on the body's points (scene units, SOFA's inclusive bounds)."""
+    obj = scene.find(sel, body)
+    if obj is None and isinstance(sel, Data) and sel.value is not None:
+        sel = sel.value
+    if obj is None and sel is not None and not isinstance(sel, str) or (isinstance(sel, str) and not sel.startswith("@")):
+        try:
+            idx = _ints(sel)
+        except (TypeError, ValueError):
+            return None, ""
+        return idx, f"{len(idx)} indices"
+    if obj is None:
+        return None, ""
+    used.add(id(obj))
+    if obj.type == "BoxROI":
+        flat = _flat_points(obj.data.get("box", [])).reshape(-1, 6)
+        mask = np.zeros(len(X), bool)
+        for b in flat:
+            mask |= np.all((X >= b[:3]) & (X <= b[3:]), axis=1)
+        boxes = "; ".join(str([float(f"{x:g}") for x in b]) for b in flat)
+        return np.flatnonzero(mask).tolist(), f"BoxROI '{obj.name}' box {boxes} (scene units): {int(mask.sum())} nodes"
+    if obj.type == "SphereROI":
+        c = _flat_points(obj.data.get("centers"))
+        r = np.atleast_1d(np.asarray(obj.data.get("radii"), dtype=float)).ravel()
+        mask = np.zeros(len(X), bool)
+        for k, ck in enumerate(c):
+            mask |= np.linalg.norm(X - ck, axis=1) <= r[min(k, r.size - 1)]
+        return np.flatnonzero(mask).tolist(), f"SphereROI '{obj.name}' (scene units): {int(mask.sum())} nodes"
+    return None, ""
+
+
+def _cable(scene, node, o, body, X, L, force, notes, tr, i, used, disp) -> dict:
+    name = o.data.get("name", f"cable{i + 1}")
+    name = node.name if name in ("cable", "aCableActuator", "CableConstraint") and node.name not in ("cable",) else str(name)
+    entry: dict = {"name": str(name)}
+    comment = [f"{o.type} '{o.name}' at {node.path()}"]
+    idx = _ints(o.data["indices"]) if o.data.get("indices") is not None else None
+    if node is body:
+        if idx is None:
+            scene.fail(f"{o.type} '{o.name}' on the body has no indices")
+        entry["indices"] = idx
+    else:
+        mo = _objects(node, ("MechanicalObject",))
+        if not mo or mo[0].data.get("position") is None:
+            scene.fail(f"{o.type} '{o.name}': its node {node.path()} has no MechanicalObject with positions")
+        used.add(id(mo[0]))
+        P = _flat_points(mo[0].data["position"])
+        idx = list(range(len(P))) if idx is None else idx
+        if max(idx) >= len(P):
+            scene.fail(f"{o.type} '{o.name}': index {max(idx)} but its MechanicalObject has {len(P)} points")
+        if len(idx) < len(P):
+            comment.append(f"points {idx[0]}..{idx[-1]} of {len(P)}")
+        entry["points"] = [[float(f"{x * L:.9g}") for x in p] for p in P[idx]]
+    if _bool(o.data.get("hasPullPoint"), True):
+        pull = o.data.get("pullPoint")
+        if pull is None:
+            notes.append(f"cable {name}: hasPullPoint without a pullPoint: SOFA's default (0, 0, 0) used")
+            pull = [0, 0, 0]
+        entry["pull_point"] = [float(f"{x * L:.9g}") for x in _flat_points(pull)[0]]
+    value_type = str(o.data.get("valueType", "displacement"))
+    if value_type == "force":
+        lo, hi = _num(o.data.get("minForce"), 0.0), _num(o.data.get("maxForce"))
+        if hi is None:
+            hi = 1.0 / force
+            notes.append(f"cable {name}: force-controlled with no maxForce: u_max set to 1 N, edit it")
+        entry["u_min"], entry["u_max"] = max(lo, 0.0) * force, hi * force
+    else:
+        dmax = _num(o.data.get("maxPositiveDisp"))
+        if dmax is None:
+            dmax = None
+        entry["u_min"], entry["u_max"] = 0.0, 1.0
+        disp.append((i, None if dmax is None else dmax * L, name))
+        comment.append(f"displacement-controlled in SOFA (maxPositiveDisp {o.data.get('maxPositiveDisp', 'unset')}, "
+                       f"minForce {o.data.get('minForce', 'unset')})")
+    tr.comments[f"cables[{i}]"] = "; ".join(comment)
+    return entry
+
+
+def _cavity(scene, node, o, L, stress, notes, tr, i, out_dir, used) -> dict:
+    name = str(o.data.get("name", node.name))
+    loaders = [x for x in node.objects if x.type in _LOADERS and x.data.get("filename")]
+    if not loaders:
+        scene.fail(f"{o.type} '{o.name}': its node {node.path()} has no surface loader (MeshSTLLoader, ...)")
+    ld = loaders[0]
+    used.add(id(ld))
+    _, file, t, _ = _loader_points(scene, ld, L)
+    entry: dict = {"name": node.name if name == o.type else name,
+                   "surface": os.path.relpath(file.resolve(), Path(out_dir).resolve()), "scale": L}
+    if t:
+        if "translation" in t:
+            t["translation"] = [x * L for x in t["translation"]]
+        entry["transform"] = t
+    value_type = str(o.data.get("valueType", "pressure"))
+    lo, hi = _num(o.data.get("minPressure"), 0.0), _num(o.data.get("maxPressure"))
+    if value_type != "pressure":
+        notes.append(f"cavity {entry['name']}: valueType {value_type} (volume growth) is not translated: controlled "
+                     f"by pressure here")
+    if hi is None:
+        hi = 1e4 / stress
+        notes.append(f"cavity {entry['name']}: no maxPressure in the scene: u_max set to 10 kPa, edit it")
+    entry["u_min"], entry["u_max"] = lo * stress, hi * stress
+    tr.comments[f"cavities[{i}]"] = f"{o.type} '{o.name}' at {node.path()}, surface {ld.type} '{ld.name}'"
+    return entry
+
+
+def _leftovers(scene: _Scene, used: set) -> list[str]:
+    """One line per component type that was not translated."""
+    groups: dict[str, list[str]] = {}
+    for n in scene.nodes:
+        for o in n.objects:
+            if id(o) in used or o.type in _ABSORBED:
+                continue
+            if o.type == "Controller":
+                label = f"controller {type(o).__name__} (Python code SOFA runs during a simulation)"
+            else:
+                label = next((f"{o.type}: {why}" for why, words in _KINDS if any(w in o.type for w in words)),
+                             f"{o.type}: unknown to the importer")
+            groups.setdefault(label, []).append(o.path())
+    return [f"{label} at {', '.join(paths)}" for label, paths in groups.items()]
+
+
+def _compliance_bounds(tr: Translation, disp: list, problem) -> None:
+    """Tension bounds of displacement-controlled cables from the linear compliance at rest."""
+    from ...fem.model import StaticModel
+    from ...solvers.equilibrium import factorize
+
+    model = StaticModel(problem, backend="casadi")
+    u0 = np.zeros(model.n_u)
+    _, K, _ = model.residual_and_tangent(np.zeros(model.n_dof), u0)
+    H = model.actuation_matrix(np.zeros(model.n_dof))
+    fac = factorize(K)
+    for i, dmax, name in disp:
+        c = float(H[i] @ fac.solve(H[i]))  # shortening per newton of tension, m/N
+        if dmax is None:
+            length = float(model.actuator_states(np.zeros(model.n_dof))[i])
+            dmax = 0.1 * length
+            tr.notes.append(f"cable {name}: no maxPositiveDisp in the scene: a stroke of 10 % of its rest length "
+                            f"({dmax * 1e3:.3g} mm) assumed")
+        T = dmax / c
+        tr.problem["cables"][i]["u_max"] = float(f"{T:.4g}")
+        tr.notes.append(f"cable {name}: displacement-controlled in SOFA; bounded here by tension: u_max = {T:.4g} N "
+                        f"shortens it by {dmax * 1e3:.4g} mm in the linear model at rest (compliance {c * 1e3:.4g} "
+                        f"mm/N) - an approximation")
+
+
+def _yaml(v) -> str:
+    def clean(x):
+        if isinstance(x, dict):
+            return {k: clean(y) for k, y in x.items()}
+        if isinstance(x, (list, tuple, np.ndarray)):
+            return [clean(y) for y in x]
+        if isinstance(x, (np.integer,)):
+            return int(x)
+        if isinstance(x, (float, np.floating)):
+            return float(f"{float(x):.10g}")
+        return x
+
+    return json.dumps(clean(v))
+
+
+def write_problem(tr: Translation, out: str | Path, scene: str) -> None:
+    """The commented problem file of a translation."""
+    lines = [f"# Imported from the SOFA scene {scene} by casadi-ws import-sofa: SI units (m, N, Pa, kg).",
+             f"# Scene units: {tr.units}."]
+    if tr.notes:
+        lines.append("# Notes:")
+        lines += [f"#   {n}" for n in tr.notes]
+    if tr.untranslated:
+        lines.append("# Not translated:")
+        lines += [f"#   {n}" for n in tr.untranslated]
+    for key, value in tr.problem.items():
+        if key in tr.comments:
+            lines.append(f"# {tr.comments[key]}")
+        if isinstance(value, list) and value and isinstance(value[0], dict):
+            lines.append(f"{key}:")
+            for i, item in enumerate(value):
+                c = tr.comments.get(f"{key}[{i}]")
+                if c:
+                    lines.append(f"  # {c}")
+                lines.append(f"  - {_yaml(item)}")
+        else:
+            lines.append(f"{key}: {_yaml(value)}")
+    Path(out).write_text("\n".join(lines) + "\n")
+
+
+def import_scene(scene: str | Path, out: str | Path, units: str | None = None) -> Translation:
+    """Translate ``scene`` and write the problem file ``out``; returns the translation."""
+    out = Path(out)
+    tr = translate(scene, units, out.parent if str(out.parent) else Path.cwd())
+    write_problem(tr, out, Path(scene).name)
+    return tr

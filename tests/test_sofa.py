@@ -1,0 +1,314 @@
+"""SOFA scenes: the recording stand-in, each translation rule on a small scene written for it, the two
+SoftRobots tutorial scenes shipped in problems/sofa/ (numbers read from the scenes by hand), and the problem
+format's SOFA conventions (indices, six-number boxes, spheres, transforms, total mass, content-sniffed
+files, snapped effectors, tips along any axis)."""
+
+import subprocess
+import sys
+import textwrap
+
+import meshio
+import numpy as np
+import pytest
+import yaml
+from conftest import REPO
+
+from casadi_ws import ProblemError, box_mesh, problem_from_dict
+from casadi_ws.fem.mesh import load_mesh, transform_points
+from casadi_ws.fem.model import StaticModel
+from casadi_ws.io.sofa import SceneError, record, translate, write_problem
+from casadi_ws.solvers.equilibrium import solve_equilibrium
+
+SOFA = REPO / "problems" / "sofa"
+FINGER, TRUNK = SOFA / "finger" / "Finger.py", SOFA / "trunk" / "trunk.py"
+
+
+def _load(tr, base):
+    return problem_from_dict(tr.problem, "<imported>", base)
+
+
+# ----------------------------------------------------------------------------------------------- tutorials
+def test_the_finger_tutorial_imports_as_its_scene_says():
+    tr = translate(FINGER, out_dir=FINGER.parent)
+    p = _load(tr, FINGER.parent)
+    # mesh/finger.vtk: 158 points, 389 tetrahedra (meshio count); units mm-kg-s from gravity -9810
+    assert (p.mesh.n_nodes, p.mesh.n_tets) == (158, 389) and tr.units == "mm-kg-s"
+    # BoxROI [-15, 0, 0, 5, 10, 15] (mm) holds these 20 points, bounds inclusive, read from the file by hand
+    assert sorted(p.fixed_nodes.tolist()) == [16, 17, 18, 19, 20, 21, 48, 51, 52, 54, 63, 101, 103, 104, 105, 106,
+                                              107, 116, 128, 143]
+    assert p.material.model == "corotational" and p.material.young_modulus == pytest.approx(600e3)
+    assert p.material.poisson_ratio == 0.45
+    assert p.material.density * p.mesh.volumes().sum() == pytest.approx(0.075)  # UniformMass totalMass 0.075 kg
+    assert np.allclose(p.gravity, [0, -9.81, 0])
+    (cable,) = p.cables
+    assert np.allclose(cable.pull_point, [0.0, 0.0125, 0.0025]) and len(cable.points) == 14
+    model = StaticModel(p)
+    # pull point, then the 14 points in index order: 165.240963 mm
+    assert model.actuator_states(np.zeros(model.n_dof))[0] * 1e3 == pytest.approx(165.240963, abs=1e-6)
+    # no PositionEffector: the centre of the end away from the support, the -x end at x = -103.366 mm
+    assert p.end_effector[0] == pytest.approx(-0.103366, abs=1e-6)
+    lines = "\n".join(tr.untranslated)
+    for kind in ("FingerController", "OglModel", "EulerImplicitSolver", "GenericConstraintSolver", "VisualStyle"):
+        assert kind in lines
+    assert any("displacement-controlled" in n for n in tr.notes)
+    eq = solve_equilibrium(model, 0.5 * model.u_max)
+    assert eq.converged
+
+
+def test_the_trunk_tutorial_imports_as_its_scene_says():
+    tr = translate(TRUNK, out_dir=TRUNK.parent)
+    p = _load(tr, TRUNK.parent)
+    assert (p.mesh.n_nodes, p.mesh.n_tets) == (709, 1972)
+    assert len(p.fixed_nodes) == 86  # BoxROI [[-20, -20, 0], [20, 20, 20]] mm: every node with z <= 20 mm
+    assert p.material.young_modulus == pytest.approx(450e3) and p.material.poisson_ratio == 0.45
+    assert p.material.density * p.mesh.volumes().sum() == pytest.approx(0.042)
+    assert [c.name for c in p.cables] == [f"cableL{i}" for i in range(4)] + [f"cableS{i}" for i in range(4)]
+    assert all(c.pull_point is None for c in p.cables)  # hasPullPoint '0': the first point is on the body
+    # the long cables use the 21 points (flattened pull point + 20), the short ones indices 0..9 of 11
+    assert [len(c.points) for c in p.cables] == [21] * 4 + [10] * 4
+    model = StaticModel(p)
+    L0 = model.actuator_states(np.zeros(model.n_dof)) * 1e3
+    assert L0[0] == pytest.approx(184.569043, abs=1e-5) and L0[4] == pytest.approx(91.030686, abs=1e-5)
+    assert np.allclose(p.end_effector, [0, 0, 0.195])  # tip: the +z end, away from the base
+    eq = solve_equilibrium(model, np.zeros(8))
+    assert eq.converged and 0.14 < -model.tip(eq.q)[1] < 0.16  # it droops ~150 mm under its own weight
+
+
+@pytest.mark.parametrize("scene", [FINGER, TRUNK], ids=["finger", "trunk"])
+def test_the_shipped_problem_files_are_what_the_importer_writes(scene, tmp_path):
+    tr = translate(scene, out_dir=scene.parent)
+    out = tmp_path / "p.yaml"
+    write_problem(tr, out, scene.name)
+    assert out.read_text() == scene.with_name(scene.stem.lower() + ".yaml").read_text()
+
+
+# ----------------------------------------------------------------------------------------------- small scenes
+def _box_file(tmp_path, name="block.vtk", fmt=None, size=(10.0, 10.0, 40.0), div=(2, 2, 8)):
+    """A block in millimetres (x, y across, z along) written as a SOFA scene would ship it."""
+    m = box_mesh(size, div, (-size[0] / 2, -size[1] / 2, 0.0))
+    path = tmp_path / name
+    meshio.write(path, meshio.Mesh(m.nodes, [("tetra", m.tets)]), file_format=fmt)
+    return path, m
+
+
+def _scene(tmp_path, body: str, extra: str = "", gravity="[0, -9810, 0]", name="scene.py"):
+    text = textwrap.dedent(f"""\
+        import Sofa.Core
+        def createScene(root):
+            root.gravity = {gravity}
+            root.addObject('FreeMotionAnimationLoop')
+            body = root.addChild('body')
+            body.addObject('EulerImplicitSolver')
+        """) + textwrap.indent(textwrap.dedent(body), "    ") + textwrap.indent(textwrap.dedent(extra), "    ")
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+_BODY = """\
+body.addObject('MeshVTKLoader', name='loader', filename='block.vtk'{transform})
+body.addObject('MeshTopology', src='@loader')
+body.addObject('MechanicalObject', name='dofs')
+body.addObject('UniformMass', totalMass=0.01)
+body.addObject('TetrahedronFEMForceField', youngModulus=500, poissonRatio=0.3, method='large')
+body.addObject('BoxROI', name='roi', box=[-6, -6, -1, 6, 6, 0.1])
+body.addObject('FixedConstraint', indices='@roi.indices')
+cable = body.addChild('cable')
+cable.addObject('MechanicalObject', position=[[4, 0, 5], [4, 0, 20], [4, 0, 35]])
+cable.addObject('CableConstraint', name='c', indices=[0, 1, 2], pullPoint=[4, 0, 0], valueType='force', maxForce=1000)
+cable.addObject('BarycentricMapping')
+"""
+
+
+def test_a_loader_transform_places_the_mesh_as_sofa_does(tmp_path):
+    _, m = _box_file(tmp_path)
+    body = _BODY.format(transform=", rotation=[0, 0, 90], translation=[10, 0, 0], scale=2")
+    scene = _scene(tmp_path, body.replace("box=[-6, -6, -1, 6, 6, 0.1]", "box=[-1, -11, -1, 21, 11, 0.1]"))
+    tr = translate(scene, out_dir=tmp_path, compliance_bounds=False)
+    p = _load(tr, tmp_path)
+    # by hand: (1, 0, 0) mm -> scaled (2, 0, 0) -> turned 90 deg about z (0, 2, 0) -> moved (10, 2, 0) mm
+    assert np.allclose(transform_points(np.array([[1.0, 0, 0]]), [0, 0, 90], [10, 0, 0], 2.0), [[10, 2, 0]])
+    assert np.allclose(p.mesh.nodes, (10 * np.array([1, 0, 0]) + 2 * m.nodes @ np.array([[0, 1, 0], [-1, 0, 0],
+                                                                                       [0, 0, 1]])) * 1e-3)
+
+
+def test_indices_boxes_and_masses_of_a_small_scene(tmp_path):
+    _, m = _box_file(tmp_path)
+    tr = translate(_scene(tmp_path, _BODY.format(transform="")), out_dir=tmp_path)
+    p = _load(tr, tmp_path)
+    base = np.flatnonzero(m.nodes[:, 2] <= 0.1)  # BoxROI [-6, -6, -1, 6, 6, 0.1] mm: the z = 0 face
+    assert sorted(p.fixed_nodes.tolist()) == base.tolist()
+    assert p.material.density * p.mesh.volumes().sum() == pytest.approx(0.01)
+    (c,) = p.cables
+    assert c.u_max == pytest.approx(1.0)  # maxForce 1000 (mN in mm-kg-s)
+    assert np.allclose(c.points, [[0.004, 0, 0.005], [0.004, 0, 0.02], [0.004, 0, 0.035]])
+    assert p.material.young_modulus == pytest.approx(500e3)  # kPa -> Pa
+
+
+def test_cable_indices_on_the_body_sphere_roi_and_partial_fixing(tmp_path):
+    _, m = _box_file(tmp_path)
+    top = np.flatnonzero(np.isclose(m.nodes[:, 0], 5) & np.isclose(m.nodes[:, 1], 0))
+    top = top[np.argsort(m.nodes[top, 2])][1:].tolist()
+    body = f"""\
+    body.addObject('MeshVTKLoader', name='loader', filename='block.vtk')
+    body.addObject('MechanicalObject')
+    body.addObject('TetrahedronFEMForceField', youngModulus=500, poissonRatio=0.3)
+    body.addObject('SphereROI', name='s', centers=[0, 0, 0], radii=8)
+    body.addObject('RestShapeSpringsForceField', points='@s.indices', stiffness=1e12)
+    body.addObject('BoxROI', name='side', box=[[-6, -6, 30], [6, 6, 41]])
+    body.addObject('PartialFixedConstraint', indices='@side.indices', fixedDirections=[1, 0, 0])
+    body.addObject('CableConstraint', indices={top}, pullPoint=[5, 0, 0], minForce=0, maxForce=500, valueType='force')
+    """
+    tr = translate(_scene(tmp_path, body), out_dir=tmp_path)
+    p = _load(tr, tmp_path)
+    assert sorted(p.fixed_nodes.tolist()) == np.flatnonzero(np.linalg.norm(m.nodes, axis=1) <= 8).tolist()
+    (nodes, comps), = p.partial_fixed
+    assert comps == (0,) and sorted(nodes.tolist()) == np.flatnonzero(m.nodes[:, 2] >= 30).tolist()
+    assert p.cables[0].nodes.tolist() == top  # points that are mesh nodes follow them exactly
+    assert p.end_effector[2] == pytest.approx(0.04)
+
+
+def test_a_file_whose_extension_lies_is_read_by_its_content(tmp_path):
+    path, m = _box_file(tmp_path, "diamond.vtk", fmt="vtu")  # XML VTU named .vtk, like SoftRobots' diamond
+    assert path.read_bytes().startswith(b"<")
+    mesh = load_mesh(path, 1e-3)
+    assert mesh.n_nodes == m.n_nodes and np.allclose(mesh.nodes, m.nodes * 1e-3)
+
+
+def test_unsupported_components_each_get_their_line(tmp_path):
+    _box_file(tmp_path)
+    extra = """\
+    body.addObject('TriangleCollisionModel')
+    body.addObject('LineCollisionModel')
+    body.addObject('MyOwnThing', name='mine')
+    visu = body.addChild('visu')
+    visu.addObject('OglModel')
+    class Ctl(Sofa.Core.Controller):
+        pass
+    body.addObject(Ctl(name='ctl'))
+    """
+    tr = translate(_scene(tmp_path, _BODY.format(transform=""), extra), out_dir=tmp_path)
+    lines = tr.untranslated
+    assert any(l.startswith("TriangleCollisionModel: collision") for l in lines)
+    assert any(l.startswith("MyOwnThing: unknown to the importer at /body/mine") for l in lines)
+    assert any(l.startswith("OglModel: visual only") for l in lines)
+    assert any(l.startswith("controller Ctl") for l in lines)
+    assert any(l.startswith("EulerImplicitSolver: dynamics") for l in lines)
+    assert len(lines) == len(set(lines))
+
+
+def test_a_cavity_surface_off_the_nodes_is_embedded(tmp_path):
+    from casadi_ws.io.cavities import cavity_enclosing, cavity_from_surface
+
+    mesh = load_mesh(REPO / "tests" / "meshes" / "hollow_sphere_4mm.vtu")
+    exact = cavity_enclosing(mesh, [0, 0, 0])
+    # the same wall with every vertex moved 0.2 % towards the centre: off the nodes, inside the void
+    pts = exact.points * 0.998
+    surf = tmp_path / "cavity.stl"
+    meshio.write(surf, meshio.Mesh(pts, [("triangle", exact.triangles)]), binary=True)
+    cav = cavity_from_surface(mesh, surf)
+    assert cav.nodes is None and cav.rest_volume() == pytest.approx(exact.rest_volume() * 0.998 ** 3, rel=1e-9)
+    with pytest.raises(ValueError, match="lies .* from the mesh"):
+        cavity_from_surface(mesh, surf, embed_tolerance=1e-9)
+
+
+def test_units_come_from_gravity_or_are_asked_for(tmp_path):
+    _box_file(tmp_path)
+    with pytest.raises(SceneError, match=r"cannot tell the units from gravity's magnitude 5 \(9.81: m, 9810: mm\); give --units"):
+        translate(_scene(tmp_path, _BODY.format(transform=""), gravity="[0, 0, -5]"), out_dir=tmp_path)
+    tr = translate(_scene(tmp_path, _BODY.format(transform=""), gravity="[0, 0, -5]"), units="mm-kg-s",
+                   out_dir=tmp_path)
+    assert np.allclose(tr.problem["gravity"], [0, 0, -0.005])
+
+
+def test_an_xml_scene_is_parsed_into_the_same_graph(tmp_path):
+    _box_file(tmp_path)
+    (tmp_path / "s.scn").write_text("""<Node name="root" gravity="0 -9810 0">
+      <Node name="body">
+        <MeshVTKLoader name="loader" filename="block.vtk"/>
+        <MechanicalObject/>
+        <TetrahedronFEMForceField youngModulus="500" poissonRatio="0.3" method="small"/>
+        <FixedConstraint indices="0 1 2 3 4 5 6 7 8"/>
+        <Node name="cable">
+          <MechanicalObject position="4 0 5  4 0 20"/>
+          <CableConstraint indices="0 1" pullPoint="4 0 0" valueType="force" maxForce="100"/>
+        </Node>
+      </Node>
+    </Node>""")
+    p = _load(translate(tmp_path / "s.scn", out_dir=tmp_path), tmp_path)
+    assert p.material.model == "linear" and len(p.fixed_nodes) == 9 and p.cables[0].u_max == pytest.approx(0.1)
+
+
+def test_bad_scenes_give_one_line_and_exit_2(tmp_path):
+    _box_file(tmp_path)
+    cases = {
+        "no_create.py": ("x = 1\n", "defines no createScene"),
+        "imports.py": ("import stlib3.physics\ndef createScene(root):\n    pass\n", "imports 'stlib3'"),
+        "raises.py": ("def createScene(root):\n    root.nothing.addObject('A')\n", "createScene failed (line 2)"),
+        "no_body.py": ("def createScene(root):\n    root.addObject('FreeMotionAnimationLoop')\n",
+                       "no node holds a TetrahedronFEMForceField"),
+    }
+    for name, (text, message) in cases.items():
+        (tmp_path / name).write_text(text)
+        r = subprocess.run([sys.executable, "-m", "casadi_ws.cli", "import-sofa", str(tmp_path / name),
+                            "--out", str(tmp_path / "o.yaml")], capture_output=True, text=True)
+        assert r.returncode == 2 and message in r.stderr and len(r.stderr.strip().splitlines()) == 1, (name, r.stderr)
+
+
+def test_the_command_writes_a_problem_that_solves(tmp_path):
+    _box_file(tmp_path)
+    scene = _scene(tmp_path, _BODY.format(transform=""))
+    r = subprocess.run([sys.executable, "-m", "casadi_ws.cli", "import-sofa", str(scene)], capture_output=True,
+                       text=True, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    out = scene.with_suffix(".yaml")
+    assert "# Not translated:" in out.read_text() and "not translated: EulerImplicitSolver" in r.stdout
+    r = subprocess.run([sys.executable, "-m", "casadi_ws.cli", "equilibrium", str(out), "--u", "0.5"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+
+
+def test_the_recorder_leaves_no_stand_in_behind(tmp_path):
+    _box_file(tmp_path)
+    record(_scene(tmp_path, _BODY.format(transform="")))
+    assert "Sofa" not in sys.modules or not hasattr(sys.modules["Sofa"], "Core") or \
+        sys.modules["Sofa"].__dict__.get("__file__")
+
+
+# ----------------------------------------------------------------------------------------------- the format
+def _problem(tmp_path, **keys):
+    _, m = _box_file(tmp_path)
+    d = {"mesh": {"file": "block.vtk", "units": "mm"}, "material": {"young_modulus": 1e5, "poisson_ratio": 0.3},
+         "fixed": {"box": [-0.006, -0.006, -0.001, 0.006, 0.006, 0.0001]},
+         "cables": [{"points": [[0.004, 0, 0.005], [0.004, 0, 0.03]], "pull_point": [0.004, 0, 0]}]}
+    d.update(keys)
+    return problem_from_dict(d, "p.yaml", tmp_path), m
+
+
+def test_format_six_number_boxes_spheres_indices_tips_and_snaps(tmp_path):
+    p, m = _problem(tmp_path)
+    assert sorted(p.fixed_nodes.tolist()) == np.flatnonzero(m.nodes[:, 2] <= 0.1).tolist()
+    p, _ = _problem(tmp_path, fixed={"indices": list(range(9))}, end_effector={"tip": {"axis": "-z"}})
+    assert sorted(p.fixed_nodes.tolist()) == list(range(9)) and p.end_effector[2] == 0.0
+    p, _ = _problem(tmp_path, fixed={"sphere": {"center": [0, 0, 0], "radius": 0.008}},
+                    end_effector={"point": [0.0, 0.0, 0.0405], "snap": 0.001})
+    assert np.allclose(p.end_effector, [0, 0, 0.04])  # moved onto the top face
+    p, _ = _problem(tmp_path, mesh={"file": "block.vtk", "units": "mm", "transform": {"rotation": [0, 0, 90]}},
+                    material={"young_modulus": 1e5, "poisson_ratio": 0.3, "total_mass": 0.5})
+    assert p.material.density * p.mesh.volumes().sum() == pytest.approx(0.5)
+
+
+@pytest.mark.parametrize("keys, message", [
+    ({"fixed": {"indices": [0, 5000]}}, "fixed.indices[1]: index 5000 is not a node of the mesh"),
+    ({"fixed": {"box": [0, 0, 0, 1, 1]}}, "fixed.box: expected [[xmin, ymin, zmin], [xmax, ymax, zmax]] or"),
+    ({"mesh": {"file": "block.vtk", "transform": {"scale": 0}}}, "mesh.transform.scale: must not be zero"),
+    ({"material": {"young_modulus": 1, "poisson_ratio": 0.3, "density": 1, "total_mass": 1}},
+     "material.total_mass: give density (kg/m^3) or total_mass (kg), not both"),
+    ({"end_effector": {"point": [0, 0, 0.05], "snap": 0.001}}, "end_effector: point [0.0, 0.0, 0.05] lies 0.01 m"),
+    ({"end_effector": {"tip": {"axis": "w"}}}, "end_effector.tip.axis: expected one of"),
+    ({"cables": [{"indices": [1], "points": [[0, 0, 0]]}]}, "cables[0].points: give either 'points' or 'indices'"),
+])
+def test_format_bad_sofa_style_keys_are_one_line(tmp_path, keys, message):
+    with pytest.raises(ProblemError) as exc:
+        _problem(tmp_path, **keys)
+    assert message in str(exc.value) and "\n" not in str(exc.value)
