@@ -52,9 +52,13 @@ def cmd_equilibrium(args) -> int:
     model = StaticModel(problem)
     eq, adm, branched = admissible_equilibrium(model, u)
     states = model.actuator_states(eq.q)
-    actuators = [{"name": a.name, "kind": a.kind, "u": float(v), "u_unit": a.input_unit,
-                  a.quantity_name: float(st), f"{a.quantity_name}_unit": a.quantity_unit}
-                 for a, v, st in zip(problem.actuators, u, states)]
+    t = model.intensities(eq.q, u)
+    actuators = [{"name": a.name, "kind": a.kind, "control": a.control, "u": float(v), "u_unit": a.input_unit,
+                  a.quantity_name: float(st), f"{a.quantity_name}_unit": a.quantity_unit,
+                  # the intensity: the tension a displacement-controlled cable carries (0 when slack)
+                  ("tension" if a.kind == "cable" else "pressure"): float(ti),
+                  ("tension" if a.kind == "cable" else "pressure") + "_unit": a.intensity_unit}
+                 for a, v, st, ti in zip(problem.actuators, u, states, t)]
     units = {"tip": "m", "u": _u_unit(problem)}
     checks = adm.to_dict() if adm is not None else {"admissible": False, "stable": None, "violations": []}
     out = {"problem": problem.name, **eq.to_dict(), **checks, "stable_branch": branched, "actuators": actuators,

@@ -41,6 +41,21 @@ class Actuator:
     name: str
     u_min: float
     u_max: float
+    control: str = "force"
+    """What the input u is: the actuator's intensity (``force`` for a cable's tension, ``pressure`` for a
+    cavity) or its quantity, prescribed (``displacement``: a cable's shortening L0 - L in m, like SOFA's
+    default valueType; ``volume``: a cavity's volume growth V - V0 in m^3, SOFA's volumeGrowth). With a
+    prescribed quantity the intensity is an unknown of the equilibrium (see :mod:`casadi_ws.fem.model`)."""
+    unilateral: bool = False
+    """The intensity cannot change sign when the quantity is prescribed (a cable pulls, never pushes: it
+    goes slack instead)."""
+    intensity_unit: str = ""
+    """Unit of the intensity (``N``, ``Pa``) whatever the control."""
+
+    @property
+    def prescribed(self) -> bool:
+        """True when the input prescribes the quantity (displacement or volume control)."""
+        return self.control in ("displacement", "volume")
 
     def rest_points(self) -> np.ndarray:
         """Rest positions (k, 3) of the material points Q depends on, in metres."""
@@ -59,7 +74,7 @@ class Actuator:
     def describe(self) -> dict:
         """Plain data that determines the actuator (for result files and checkpoint fingerprints)."""
         return {"kind": self.kind, "name": self.name, "u_min": float(self.u_min), "u_max": float(self.u_max),
-                "points": np.asarray(self.rest_points(), dtype=float).tolist()}
+                "control": self.control, "points": np.asarray(self.rest_points(), dtype=float).tolist()}
 
 
 def quantity_functions(actuator: Actuator) -> dict:

@@ -35,11 +35,20 @@ class Cable(Actuator):
     """Mesh node of each passage point (k,), if the points were given as node indices (SOFA's
     ``indices``): they then move exactly with those nodes."""
 
+    control: str = "force"
+    """``force``: u is the tension (N); ``displacement``: u is the shortening L0 - L (m) the motor imposes,
+    the tension an unknown >= 0 (a slack cable carries none), like SOFA's CableConstraint."""
+
     kind = "cable"
-    input_unit = "N"
+    intensity_unit = "N"
+    unilateral = True
     quantity_name = "length"
     quantity_unit = "m"
     sign = -1.0
+
+    @property
+    def input_unit(self) -> str:
+        return "m" if self.control == "displacement" else "N"
 
     def rest_points(self) -> np.ndarray:
         return np.asarray(self.points, dtype=float)

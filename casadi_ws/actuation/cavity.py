@@ -89,11 +89,19 @@ class Cavity(Actuator):
     volume_max: float | None = None
     """Largest volume of the chamber (m^3) before it bursts; None: unlimited."""
 
+    control: str = "pressure"
+    """``pressure``: u is the pressure (Pa); ``volume``: u is the volume growth V - V0 (m^3), the pressure
+    an unknown (SOFA's volumeGrowth)."""
+
     kind = "cavity"
-    input_unit = "Pa"
+    intensity_unit = "Pa"
     quantity_name = "volume"
     quantity_unit = "m^3"
     sign = 1.0
+
+    @property
+    def input_unit(self) -> str:
+        return "m^3" if self.control == "volume" else "Pa"
 
     def rest_points(self) -> np.ndarray:
         return np.asarray(self.points, dtype=float)

@@ -25,7 +25,6 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from .mesh import embed
 
 __all__ = ["point_function", "quantity_function", "residual_function"]
 
@@ -136,8 +135,10 @@ class _ResidualFunctions:
         self.K = _Pattern((n, n), rows, cols)
         # dR/du_a is nonzero on the free dofs that move actuator a's points
         du_rows, du_cols = [], []
+        prescribed = {int(a): k for k, a in enumerate(getattr(m, "prescribed", []))}
         for a, d in enumerate(m._act):
-            r = np.unique(d.W[:, m.free].tocoo().col)
+            # a prescribed quantity's input enters its own equation only
+            r = np.array([m.n_free_mech + prescribed[a]]) if a in prescribed else np.unique(d.W[:, m.free].tocoo().col)
             du_rows.append(r)
             du_cols.append(np.full(r.size, a))
         cat = lambda parts: np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)  # noqa: E731
@@ -152,6 +153,10 @@ class _ResidualFunctions:
             P = (abs(Wf).T @ S @ abs(Wf)).tocoo()
             hr.append(P.row)
             hc.append(P.col)
+        for r in getattr(m, "_border_dofs", []):  # lam_k phi(a, b(q)) couples all the actuator's dofs
+            rr, cc = np.meshgrid(r, r, indexing="ij")
+            hr.append(rr.ravel())
+            hc.append(cc.ravel())
         keys = np.unique(np.concatenate(hc) * n + np.concatenate(hr))
         self.H = _Pattern((n, n), keys % n, keys // n)
         self._h_keys = keys
@@ -306,7 +311,7 @@ def point_function(model, points=None) -> ca.Function:
         W, p0 = model.C_free, model.p0
     else:
         pts = np.atleast_2d(np.asarray(points, dtype=float))
-        E = embed(model.mesh, pts).matrix(model.mesh).tocsr()
+        E = model.embedding(pts)
         W, p0 = E[:, model.free], E @ model.X
     W = sp.csc_matrix(W)
     W.sort_indices()

@@ -3,7 +3,25 @@
     R(q, u) = f_int(q) - H(q)^T u - F = 0,        H_a = sign_a dQ_a/dq,    p_E = C q + p_E(0)
 
 q is the vector of nodal displacements (3n, node-major; fixed dofs stay 0), u the actuator inputs, Q_a the
-quantity of actuator a (a cable's length: sign -1, so H = -dL/dq). The element laws come from
+quantity of actuator a (a cable's length: sign -1, so H = -dL/dq).
+
+Prescribed quantities (a displacement-controlled cable, a cavity controlled by its volume growth): the input
+u_a is then g_a's target, g_a(q) = sign_a (Q_a(q) - Q_a(rest)) (a cable's shortening, a chamber's growth),
+and the actuator's intensity t_a (tension, pressure) is an unknown appended to the state: q = [nodal
+displacements, t / kappa of the prescribed actuators] (the intensity in units of the quantity, so that the
+state's entries are all lengths for cables and Newton's norms weigh them alike). Each adds one equation,
+
+    bilateral (a chamber):     kappa_a (g_a(q) - u_a) = 0
+    unilateral (a cable):      phi(t_a, kappa_a (g_a(q) - u_a)) = 0,   phi(a, b) = a + b - sqrt(a^2 + b^2 + eps^2)
+
+phi is the Fischer-Burmeister function, zero iff a >= 0, b >= 0 and a b = eps^2 / 2: the cable is taut
+(shortening = the motor's, tension >= 0) or slack (tension ~0, shortened more than the motor pulled), as
+SOFA's CableConstraint with minForce 0. eps (1e-8 of kappa_a Q_a(rest)) keeps phi smooth, so Newton, the
+sensitivities and the NLPs' Hessians see one smooth residual; what it changes is ~eps^2, far below any
+tolerance. kappa_a = 1 / (H_a K0^-1 H_a^T), the actuator's own stiffness at rest, gives the row the units
+and the scale of a force (or pressure). Every method then works unchanged on the augmented state: the
+tangent is bordered by the prescribed actuators' rows, dR/du_a is nonzero in its own row only, and the
+end-effector, the mesh operators and the loads carry zero columns for the intensities. The element laws come from
 :mod:`casadi_ws.fem.materials` (CasADi SX, one graph per element type) and are evaluated over the mesh by
 :class:`casadi_ws.fem.kernels.ElementBatch`; the actuators' quantities and their derivatives are one CasADi
 function of the actuators' embedded points (:mod:`casadi_ws.actuation`). Assembly uses index maps fixed
@@ -50,12 +68,20 @@ class StaticModel:
         self.mesh = mesh
         self.element = element = mesh.element
         self.n_nodes = mesh.n_nodes
-        self.n_dof = 3 * mesh.n_nodes
+        self.actuators = list(problem.actuators)
+        self.prescribed = np.flatnonzero([getattr(a, "prescribed", False) for a in self.actuators])
+        """Indices of the actuators whose input is their quantity (their intensity is then a state)."""
+        self.n_lam = self.prescribed.size
+        self.n_mech = 3 * mesh.n_nodes
+        """Nodal displacements in the state; the intensities of prescribed actuators follow them."""
+        self.n_dof = self.n_mech + self.n_lam
         fixed = problem.fixed_dofs()  # (n_nodes, 3)
         self.fixed_nodes = np.flatnonzero(fixed.all(axis=1))
-        self.free = np.flatnonzero(~fixed.ravel())
+        self.free_mech = np.flatnonzero(~fixed.ravel())
+        self.n_free_mech = self.free_mech.size
+        self.free = np.concatenate([self.free_mech, self.n_mech + np.arange(self.n_lam)])
         self.n_free = self.free.size
-        self.X = mesh.nodes.reshape(-1).copy()
+        self.X = np.concatenate([mesh.nodes.reshape(-1), np.zeros(self.n_lam)])
 
         # --- elements
         mat = problem.material
@@ -84,14 +110,13 @@ class StaticModel:
         if np.any(g):
             weights = rho[:, None] * element.body_load_weights(Xe)  # kg per node and element
             for a in range(element.n_nodes):
-                np.add.at(F.reshape(-1, 3), mesh.tets[:, a], weights[:, a, None] * g[None, :])
+                np.add.at(F[: self.n_mech].reshape(-1, 3), mesh.tets[:, a], weights[:, a, None] * g[None, :])
         for point, force in problem.point_loads:
-            W = embed(mesh, np.asarray(point)[None]).matrix(mesh)
+            W = self.embedding(np.asarray(point)[None])
             F += W.T @ np.asarray(force, dtype=float)
         self.F = F
 
         # --- actuators
-        self.actuators = list(problem.actuators)
         self.n_u = len(self.actuators)
         self.u_min = np.array([a.u_min for a in self.actuators], dtype=float)
         self.u_max = np.array([a.u_max for a in self.actuators], dtype=float)
@@ -99,6 +124,9 @@ class StaticModel:
         self._build_actuators()
         self._build_pattern()
         rest_Q = self.actuator_states(np.zeros(self.n_dof))
+        self.rest_quantities = rest_Q
+        """Each actuator's quantity at rest (a cable's length, a chamber's volume)."""
+        self._build_prescribed()
         limits = [a.quantity_limits(Q0) for a, Q0 in zip(self.actuators, rest_Q)]
         self.quantity_limits = (np.array([l[0] for l in limits]), np.array([l[1] for l in limits]),
                                 [l[2] if np.isfinite(l[0]) or np.isfinite(l[1]) else "" for l in limits])
@@ -114,7 +142,7 @@ class StaticModel:
 
         # --- end-effector: p_E = C q + p_E(0)
         ee = np.atleast_2d(np.asarray(problem.end_effector, dtype=float))
-        self.C = embed(mesh, ee).matrix(mesh).tocsr()
+        self.C = self.embedding(ee)
         self.p0 = self.C @ self.X
         self.C_free = self.C[:, self.free].tocsc()
 
@@ -131,6 +159,16 @@ class StaticModel:
         self._G_qp = G  # (m, n_qp, n_nodes, 3): deformation gradients for the admissibility checks
 
     # ------------------------------------------------------------------ assembly
+    def embedding(self, points: np.ndarray) -> sp.csr_matrix:
+        """W (3k x n_dof): positions of embedded points = W @ (X + q) (zero columns for intensities)."""
+        return self._pad(embed(self.mesh, np.atleast_2d(points)).matrix(self.mesh))
+
+    def _pad(self, W) -> sp.csr_matrix:
+        W = sp.csr_matrix(W)
+        if self.n_lam:
+            W = sp.hstack([W, sp.csr_matrix((W.shape[0], self.n_lam))]).tocsr()
+        return W
+
     def _build_actuators(self):
         """All actuators in one CasADi call (a call costs ~0.1 ms of overhead, a residual ~1 ms in all)."""
         self._act: list[_ActuatorData] = []
@@ -160,7 +198,7 @@ class StaticModel:
         (``actuator.nodes``) follow them exactly, others are embedded in their host elements."""
         nodes = getattr(actuator, "nodes", None)
         if nodes is None:
-            return embed(self.mesh, np.asarray(actuator.rest_points(), dtype=float)).matrix(self.mesh)
+            return self.embedding(np.asarray(actuator.rest_points(), dtype=float))
         cols = (3 * np.asarray(nodes, dtype=np.int64)[:, None] + np.arange(3)).ravel()
         return sp.csr_matrix((np.ones(cols.size), (np.arange(cols.size), cols)), shape=(cols.size, self.n_dof))
 
@@ -207,13 +245,27 @@ class StaticModel:
             h_weight.append(Wc.data[e1] * Wc.data[e2])
             h_act.append(np.full(e1.size, i))
             keys.append(Wc.indices[e2].astype(np.int64) * self.n_free + Wc.indices[e1])
+        n_act_keys = sum(k.size for k in keys[1:])
+        # prescribed actuator k borders K: column and row n_free_mech + k over the dofs its points move, and
+        # the diagonal (the Fischer-Burmeister row's dependence on the intensity)
+        self._border_dofs = []
+        for k, a in enumerate(self.prescribed):
+            r = np.unique(self._act[a].W[:, self.free].tocoo().col).astype(np.int64)
+            self._border_dofs.append(r)
+            j = self.n_free_mech + k
+            keys += [np.full(r.size, j) * self.n_free + r, r * self.n_free + j, np.array([j * self.n_free + j])]
         ukey, slot = np.unique(np.concatenate(keys), return_inverse=True)
         # every element entry has a slot; those of fixed dofs go to one past the end, cut off after the
         # bincount (cheaper than gathering the kept ones on every assembly)
         n_el = keys[0].size
         self._k_slot = np.full(keep.size, ukey.size, dtype=np.int64)
         self._k_slot[keep] = slot[:n_el]
-        self._act_slots = slot[n_el:]
+        self._act_slots = slot[n_el:n_el + n_act_keys]
+        border = slot[n_el + n_act_keys:]
+        self._border_slots = []  # per prescribed actuator: (column slots, row slots, diagonal slot)
+        for r in self._border_dofs:
+            self._border_slots.append((border[: r.size], border[r.size: 2 * r.size], border[2 * r.size]))
+            border = border[2 * r.size + 1:]
         self._act_h_index = np.concatenate(h_index + [np.zeros(0, dtype=np.int64)])
         self._act_h_weight = np.concatenate(h_weight + [np.zeros(0)])
         self._act_of_entry = np.concatenate(h_act + [np.zeros(0, dtype=np.int64)])
@@ -233,7 +285,7 @@ class StaticModel:
 
     def positions(self, q: np.ndarray) -> np.ndarray:
         """Current node positions (n, 3)."""
-        return (self.X + q).reshape(-1, 3)
+        return (self.X + q)[: self.n_mech].reshape(-1, 3)
 
     def deformation_gradients(self, q: np.ndarray) -> np.ndarray:
         """F = I + du/dX at every quadrature point, (m, n_qp, 3, 3)."""
@@ -258,13 +310,70 @@ class StaticModel:
         ke, = self._stiff(*self._element_inputs(q))
         return self.assemble(ke)
 
-    def assemble(self, ke: np.ndarray, actuator_weights: np.ndarray | None = None) -> sp.csc_matrix:
-        """The free-dof matrix from element matrices ke (m, n_dof_e^2), plus actuator Hessian entries if
-        given."""
+    def assemble(self, ke: np.ndarray, actuator_weights: np.ndarray | None = None, border=None) -> sp.csc_matrix:
+        """The free-dof matrix from element matrices ke (m, n_dof_e^2), plus actuator Hessian entries and
+        the prescribed actuators' border values ((column, row, diagonal) per actuator) if given. The pattern
+        is fixed (explicit zeros kept): factorisations reuse one ordering, and the CasADi Functions rely
+        on it."""
         data = np.bincount(self._k_slot, weights=ke.ravel(), minlength=self._k_nnz + 1)[: self._k_nnz]
         if actuator_weights is not None and actuator_weights.size:
             data += np.bincount(self._act_slots, weights=actuator_weights, minlength=self._k_nnz)
+        for (cs, rs, ds), values in zip(self._border_slots, border or ()):
+            data[cs], data[rs], data[ds] = values
         return sp.csc_matrix((data, self._k_rows, self._k_indptr), shape=(self.n_free, self.n_free))
+
+    # ------------------------------------------------------------------ prescribed quantities
+    def _build_prescribed(self):
+        """kappa (the actuator's own stiffness at rest, 1 / H K0^-1 H^T) and eps of each prescribed actuator
+        (see the module's docstring)."""
+        self.kappa = np.zeros(self.n_lam)
+        self.eps = np.zeros(self.n_lam)
+        if not self.n_lam:
+            return
+        from scipy.sparse.linalg import splu
+
+        q0 = np.zeros(self.n_dof)
+        ke, = self._stiff(*self._element_inputs(q0))
+        n = self.n_free_mech
+        K0 = self.assemble(ke)[:n, :n].tocsc()
+        H = self.actuation_rows(q0)[:, :n]
+        lu = splu(K0)
+        for k, a in enumerate(self.prescribed):
+            c = float(H[a] @ lu.solve(H[a]))
+            if not c > 0:
+                raise ValueError(f"actuator {self.actuators[a].name!r}: its quantity does not change under its "
+                                 f"intensity at rest (compliance {c:g}), so it cannot be prescribed")
+            self.kappa[k] = 1.0 / c
+            self.eps[k] = 1e-8 * self.kappa[k] * abs(self.rest_quantities[a])
+
+    def intensities(self, q: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Each actuator's intensity (tension N, pressure Pa): u, or the state's unknown where the input is
+        the quantity."""
+        t = np.array(u, dtype=float, copy=True).reshape(-1)
+        t[self.prescribed] = self.kappa * q[self.n_mech:]
+        return t
+
+    def _prescribed_rows(self, q, u, Q):
+        """(phi, dphi/da, dphi/db, d2phi/da2, d2phi/dadb, d2phi/db2) of each prescribed actuator's equation,
+        a = its intensity, b = kappa (g(q) - u); with u None, b from the equilibrium's a b = eps^2/2. (The
+        state holds a / kappa: its derivatives carry a factor kappa per a.)"""
+        a = self.kappa * q[self.n_mech:]
+        pre = self.prescribed
+        if u is None:
+            b = self.eps**2 / (2 * np.maximum(a, self.eps))
+        else:
+            g = self.sign[pre] * (Q[pre] - self.rest_quantities[pre])
+            b = self.kappa * (g - np.asarray(u, dtype=float)[pre])
+        uni = np.array([self.actuators[i].unilateral for i in pre], dtype=bool)
+        rho = np.sqrt(a * a + b * b + self.eps**2)
+        one, zero = np.ones_like(a), np.zeros_like(a)
+        phi = np.where(uni, a + b - rho, b)
+        pa, pb = np.where(uni, 1 - a / rho, zero), np.where(uni, 1 - b / rho, one)
+        r3 = rho**3
+        paa = np.where(uni, -(b * b + self.eps**2) / r3, zero)
+        pab = np.where(uni, a * b / r3, zero)
+        pbb = np.where(uni, -(a * a + self.eps**2) / r3, zero)
+        return phi, pa, pb, paa, pab, pbb
 
     def actuator_states(self, q: np.ndarray) -> np.ndarray:
         """Each actuator's quantity at q (a cable's length in m), (n_u,)."""
@@ -301,15 +410,18 @@ class StaticModel:
 
     # ------------------------------------------------------------------ the static model
     def residual(self, q: np.ndarray, u: np.ndarray, load: float = 1.0, with_scale: bool = False):
-        """R(q, u) = f_int - sum_a u_a sign_a dQ_a/dq - load * F, on the free dofs.
+        """R(q, u) = f_int - sum_a t_a sign_a dQ_a/dq - load * F on the free dofs (t the intensities: u, or
+        the state's where the quantity is prescribed), then one equation per prescribed actuator.
 
-        With ``with_scale`` also returns ||H^T u + load F|| (free dofs), the reference of the relative
+        With ``with_scale`` also returns ||H^T t + load F|| (free dofs), the reference of the relative
         residual (plus a round-off allowance, see below), floored so that a zero load is judged absolutely.
         """
-        _, dQ, _ = self.actuator_terms(q)
-        ext = (dQ.T @ (-self.sign * np.asarray(u, dtype=float)) - load * self.F)[self.free]
+        Q, dQ, _ = self.actuator_terms(q)
+        ext = (dQ.T @ (-self.sign * self.intensities(q, u)) - load * self.F)[self.free]
         fe, = self._force(*self._element_inputs(q))
         R = np.bincount(self._edofs.ravel(), weights=fe.ravel(), minlength=self.n_dof)[self.free] + ext
+        if self.n_lam:
+            R[self.n_free_mech:] = self._prescribed_rows(q, u, Q)[0]
         if with_scale:
             # 1e-6 of the unassembled element forces: the assembly's round-off (~1e-16 of them) then stays
             # far below any tolerance, even when the applied load is tiny
@@ -317,22 +429,99 @@ class StaticModel:
         return R
 
     def residual_and_tangent(self, q: np.ndarray, u: np.ndarray, load: float = 1.0):
-        """(R, K, dR/du) on the free dofs; K = dR/dq includes the actuators' geometric stiffness."""
+        """(R, K, dR/du) on the free dofs; K = dR/dq includes the actuators' geometric stiffness (and the
+        prescribed actuators' border rows and columns)."""
         u = np.asarray(u, dtype=float)
-        _, dQ, h = self.actuator_terms(q, hessians=True)
-        coef = -self.sign * u  # R holds -sign_a u_a dQ_a/dq
+        Q, dQ, h = self.actuator_terms(q, hessians=True)
+        t = self.intensities(q, u)
+        coef = -self.sign * t  # R holds -sign_a t_a dQ_a/dq
         weights = (coef[self._act_of_entry] * self._act_h_weight * h[self._act_h_index]
                    if self._act else np.zeros(0))
         inputs = self._element_inputs(q)
         fe, ke = self._force(*inputs)[0], self._stiff(*inputs)[0]
         R = (np.bincount(self._edofs.ravel(), weights=fe.ravel(), minlength=self.n_dof) + dQ.T @ coef
              - load * self.F)[self.free]
-        return R, self.assemble(ke, weights), (dQ * -self.sign[:, None])[:, self.free].T
+        dRdu = (dQ * -self.sign[:, None])[:, self.free].T
+        border = None
+        if self.n_lam:
+            phi, pa, pb, *_ = self._prescribed_rows(q, u, Q)
+            R[self.n_free_mech:] = phi
+            H = (dQ * self.sign[:, None])[:, self.free]
+            border = []
+            for k, (a, r) in enumerate(zip(self.prescribed, self._border_dofs)):
+                kap = self.kappa[k]
+                border.append((-kap * H[a, r], pb[k] * kap * H[a, r], kap * pa[k]))
+                dRdu[:, a] = 0.0
+                dRdu[self.n_free_mech + k, a] = -pb[k] * self.kappa[k]
+        return R, self.assemble(ke, weights, border), dRdu
 
-    def actuation_matrix(self, q: np.ndarray) -> np.ndarray:
-        """H(q) = sign dQ/dq on the free dofs, (n_u, n_free) (a cable's row: -dL/dq)."""
+    def actuation_rows(self, q: np.ndarray) -> np.ndarray:
+        """H(q) = sign dQ/dq on the free dofs, (n_u, n_free) (a cable's row: -dL/dq): where each actuator's
+        intensity pushes the body."""
         _, dQ, _ = self.actuator_terms(q)
         return (dQ * self.sign[:, None])[:, self.free]
+
+    def actuation_matrix(self, q: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+        """-dR/du^T (n_u, n_free), so that dq/du = K^-1 H^T: H = sign dQ/dq for an actuator whose input is
+        its intensity; for a prescribed quantity, kappa dphi/db in its own row (at an equilibrium without
+        ``u``, from the row's a b = eps^2/2: ~kappa for a taut cable, ~0 for a slack one)."""
+        H = self.actuation_rows(q)
+        if self.n_lam:
+            Q = self.actuator_states(q) if u is not None else None
+            pb = self._prescribed_rows(q, u, Q)[2]
+            H[self.prescribed] = 0.0
+            H[self.prescribed, self.n_free_mech + np.arange(self.n_lam)] = pb * self.kappa
+        return H
+
+    def slack(self, q: np.ndarray) -> np.ndarray:
+        """(n_u,) bool: the prescribed unilateral actuators that are slack at the equilibrium q (a cable with
+        no tension, shortened more than its motor pulled: tension below eps / sqrt 2, where the Fischer-
+        Burmeister row depends more on the tension than on the shortening)."""
+        out = np.zeros(self.n_u, dtype=bool)
+        if self.n_lam:
+            uni = np.array([self.actuators[a].unilateral for a in self.prescribed], dtype=bool)
+            out[self.prescribed] = uni & (self.kappa * q[self.n_mech:] < self.eps / np.sqrt(2))
+        return out
+
+    def taut_rows(self, q: np.ndarray):
+        """For each slack actuator a (:meth:`slack`): (a, its row j of the tangent, the change w of that row
+        that makes the cable taut: (1 - phi_b) kappa H on its dofs and -phi_a at j). The sensitivities of a
+        slack cable once taut follow from the tangent by a rank-one update."""
+        out = []
+        slack = self.slack(q)
+        if not slack.any():
+            return out
+        _, pa, pb, *_ = self._prescribed_rows(q, None, None)
+        H = self.actuation_rows(q)
+        for k, a in enumerate(self.prescribed):
+            if slack[a]:
+                j = self.n_free_mech + k
+                w = np.zeros(self.n_free)
+                r = self._border_dofs[k]
+                w[r] = (1 - pb[k]) * self.kappa[k] * H[a, r]
+                w[j] = -self.kappa[k] * pa[k]
+                out.append((a, j, w))
+        return out
+
+    def stability_matrix(self, q: np.ndarray, u: np.ndarray) -> sp.csc_matrix:
+        """The stiffness on the nodal dofs with the prescribed quantities held: K + sum_k w_k rho_k H_k H_k^T,
+        rho_k = 1e3 kappa_k (held 1000x stiffer than the body holds them at rest), w_k = dphi/db (1 for a
+        taut cable or a chamber, 0 for a slack cable). Positive definite iff K is on the motions that keep
+        the held quantities (the saddle-point K of Newton has negative pivots whatever the stability)."""
+        _, K, _ = self.residual_and_tangent(q, u)
+        n = self.n_free_mech
+        K = K[:n, :n]
+        if not self.n_lam:
+            return K.tocsc()
+        Q = self.actuator_states(q)
+        pb = self._prescribed_rows(q, u, Q)[2]
+        H = self.actuation_rows(q)[:, :n]
+        for k, a in enumerate(self.prescribed):
+            r = self._border_dofs[k]
+            rr, cc = np.meshgrid(r, r, indexing="ij")
+            K = K + sp.csc_matrix(((1e3 * self.kappa[k] * pb[k] * np.outer(H[a, r], H[a, r])).ravel(),
+                                   (rr.ravel(), cc.ravel())), shape=(n, n))
+        return K.tocsc()
 
     def residual_hessian(self, q: np.ndarray, u: np.ndarray, lam: np.ndarray):
         """Second derivatives of lam . R (lam on the free dofs): (d(K^T lam)/dq on the free dofs, sparse;
@@ -342,12 +531,49 @@ class StaticModel:
             # "auto", not "c": a kernel too large to compile (kernels.MAX_COMPILED_CODE) runs in CasADi's VM
             # even when the others are compiled
             self._hv = ElementBatch(self.hessian_vector_function(), "casadi" if self.backend == "casadi" else "auto")
+        u = np.asarray(u, dtype=float)
         lam_full = np.zeros(self.n_dof)
         lam_full[self.free] = lam
         he, = self._hv(*self._element_inputs(q), lam_full[self._edofs])
-        Hact, cols = self.actuator_third(q, lam_full, np.asarray(u, dtype=float))
+        Hact, cols = self.actuator_third(q, lam_full, self.intensities(q, u))
         Hqu = np.column_stack(cols) if cols else np.zeros((self.n_free, 0))
-        return self.assemble(he) + Hact, Hqu
+        Hqq = self.assemble(he) + Hact
+        if self.n_lam:
+            Hqq, Hqu = self._prescribed_hessian(q, u, lam, Hqq, Hqu)
+        return Hqq, Hqu
+
+    def _prescribed_hessian(self, q, u, lam, Hqq, Hqu):
+        """The prescribed actuators' share of d(K^T lam)/d(q, u) (see the module's docstring): the
+        intensity's column of the geometric stiffness, and the second derivatives of phi(a, b)."""
+        Q, dQ, h = self.actuator_terms(q, hessians=True)
+        _, pa, pb, paa, pab, pbb = self._prescribed_rows(q, u, Q)
+        H = (dQ * self.sign[:, None])[:, self.free]
+        n, nm = self.n_free, self.n_free_mech
+        extra = sp.lil_matrix((n, n))
+        for k, a in enumerate(self.prescribed):
+            j, lk, kap = nm + k, lam[nm + k], self.kappa[k]
+            d = self._act[a]
+            Wf = d.W[:, self.free]
+            d2Q = (Wf.T @ self._point_hessian(a, h) @ Wf).tocsr()
+            # lam_k phi(a, b(q)): kappa (phi_b sign d2Q + phi_bb kappa H H^T) in (q, q)
+            Hqq = Hqq + (lk * kap * pb[k] * self.sign[a]) * d2Q
+            r = self._border_dofs[k]
+            rr, cc = np.meshgrid(r, r, indexing="ij")
+            Hqq = Hqq + sp.csr_matrix(((lk * pbb[k] * kap * kap * np.outer(H[a, r], H[a, r])).ravel(),
+                                       (rr.ravel(), cc.ravel())), shape=(n, n))
+            # (q, t_k) and (t_k, q): d(K^T lam)_q / dt_k = -sign d2Q lam_m (the column actuator_third gave
+            # for u_a), plus lam_k kappa phi_ab H; times kappa, the state holding t_k / kappa
+            c = kap * (Hqu[:, a] + lk * kap * pab[k] * H[a])
+            c[nm:] = 0.0
+            extra[:, j] = c[:, None]
+            extra[j, :] = c[None, :]
+            extra[j, j] = lk * paa[k] * kap * kap
+            # d(dR/du_a^T lam)/dq = d(-kappa phi_b lam_k)/dq
+            col = np.zeros(n)
+            col[:] = -kap * lk * pbb[k] * kap * H[a]
+            col[j] = -kap * lk * pab[k] * kap
+            Hqu[:, a] = col
+        return (Hqq + extra.tocsr()).tocsc(), Hqu
 
     @property
     def u_lower(self) -> np.ndarray:

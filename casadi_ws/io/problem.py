@@ -148,9 +148,9 @@ _MESH_FILE = {"file", "scale", "units", "order", "transform"}
 _TRANSFORM = {"rotation", "translation", "scale"}
 _MATERIAL = {"model", "young_modulus", "poisson_ratio", "density", "total_mass", "max_stretch"}
 _REGION = {"box", "young_modulus", "poisson_ratio", "density", "max_stretch"}
-_CABLE = {"name", "points", "indices", "pull_point", "trunk_routing", "u_min", "u_max", "stroke_max"}
+_CABLE = {"name", "points", "indices", "pull_point", "trunk_routing", "u_min", "u_max", "stroke_max", "control"}
 _CAVITY = {"name", "surface", "enclosing", "u_min", "u_max", "scale", "transform", "volume_max", "volume_max_ratio",
-           "embed_tolerance"}
+           "embed_tolerance", "control"}
 _ADMISSIBILITY = {"stability", "inversion", "self_penetration", "min_det_F", "penetration_depth",
                   "keep_inadmissible"}
 _COMPONENTS = {"x": 0, "y": 1, "z": 2}
@@ -445,10 +445,12 @@ def _read_cavities(r: _Reader, lst, mesh: Mesh, base: Path) -> list:
         key = f"cavities[{i}]"
         r.mapping(c, key, _CAVITY)
         name = str(c.get("name", f"cavity{i + 1}"))
+        control = _control(r, c, key, ("pressure", "volume"))
+        unit = "m^3" if control == "volume" else "Pa"
         u_min = r.number(c, "u_min", key, 0.0)
         u_max = r.number(c, "u_max", key)
         if u_min > u_max:
-            r.fail(f"{key}.u_min", f"lower bound {u_min} Pa exceeds upper bound u_max = {u_max} Pa")
+            r.fail(f"{key}.u_min", f"lower bound {u_min} {unit} exceeds upper bound u_max = {u_max} {unit}")
         if ("surface" in c) == ("enclosing" in c):
             r.fail(key, "give exactly one of 'surface: FILE' or 'enclosing: [x, y, z]'")
         try:
@@ -474,6 +476,7 @@ def _read_cavities(r: _Reader, lst, mesh: Mesh, base: Path) -> list:
         ratio = r.optional(c, "volume_max_ratio", key, lo=0.0, lo_open=True)
         if ratio is not None:
             cav.volume_max = ratio * cav.rest_volume()
+        cav.control = control
         if cav.volume_max is not None and cav.volume_max <= cav.rest_volume():
             r.fail(f"{key}.volume_max" + ("_ratio" if ratio is not None else ""),
                    f"the limit {cav.volume_max:.6g} m^3 is not above the rest volume {cav.rest_volume():.6g} m^3")
@@ -490,8 +493,10 @@ def _read_cables(r: _Reader, lst, mesh: Mesh) -> list[Cable]:
         key = f"cables[{i}]"
         r.mapping(c, key, _CABLE)
         name = str(c.get("name", f"cable{i + 1}"))
+        control = _control(r, c, key, ("force", "displacement"))
         u_min = r.number(c, "u_min", key, 0.0)
-        u_max = r.number(c, "u_max", key, 100.0)
+        # a tension has a usual default; a stroke depends on the robot's size, so it must be given
+        u_max = r.number(c, "u_max", key, 100.0 if control == "force" else None)
         if u_min > u_max:
             r.fail(f"{key}.u_min", f"lower bound {u_min} exceeds upper bound u_max = {u_max}")
         if "trunk_routing" in c:
@@ -525,8 +530,17 @@ def _read_cables(r: _Reader, lst, mesh: Mesh) -> list[Cable]:
             r.fail(f"{key}.points[{j}]", f"point {np.round(cable.points[j], 6).tolist()} lies "
                    f"{emb.outside[j]:.4g} m outside the mesh (allowed: {MAX_OUTSIDE_RELATIVE * size:.3g} m)")
         cable.stroke_max = r.optional(c, "stroke_max", key, lo=0.0, lo_open=True)
+        cable.control = control
         cables.append(cable)
     return cables
+
+
+def _control(r: _Reader, c: dict, key: str, allowed: tuple[str, str]) -> str:
+    v = c.get("control", allowed[0])
+    if v not in allowed:
+        r.fail(f"{key}.control", f"expected {allowed[0]} (u is the {'tension' if allowed[0] == 'force' else 'pressure'}) "
+                                 f"or {allowed[1]} (u is the {'shortening, m' if allowed[1] == 'displacement' else 'volume growth, m^3'}), got {v!r}")
+    return v
 
 
 def tip_centre(mesh: Mesh, axis: str = "+z") -> np.ndarray:

@@ -33,7 +33,8 @@ def fingerprint(method: str, model, settings: dict) -> str:
     """Hash of what determines the answer: the method, the model's geometry and loads, the settings."""
     h = hashlib.sha256(method.encode())
     # _Pe: quadrature weights and Lame parameters per element (material regions)
-    for a in (model.X, model.mesh.tets, model.free, model.F, model.u_min, model.u_max, model.p0, model._Pe):
+    for a in (model.X, model.mesh.tets, model.free, model.F, model.u_min, model.u_max, model.p0, model._Pe,
+              model.prescribed):
         h.update(np.ascontiguousarray(a).tobytes())
     pb = model.problem
     h.update(json.dumps([asdict(pb.material), asdict(pb.solver), [a.describe() for a in model.actuators],

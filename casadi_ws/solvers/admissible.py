@@ -175,9 +175,14 @@ def _state_limits(model, q, F, out: Admissibility) -> list[str]:
 
 def _stability(model, q, u, fac, K):
     """(stable, negative pivots, smallest eigenvalue or None, its mode or None); see the module."""
-    from .equilibrium import tangent_factorization
+    from .equilibrium import Factorization, factorize, tangent_factorization
 
-    if fac is None or _stale(fac.q, q):
+    if getattr(model, "n_lam", 0):
+        # prescribed quantities border K (a saddle point, whose pivots say nothing): judge the stiffness
+        # with them held instead (:meth:`StaticModel.stability_matrix`)
+        K = model.stability_matrix(q, u)
+        fac = Factorization(factorize(K), q.copy())
+    elif fac is None or _stale(fac.q, q):
         fac = tangent_factorization(model, q, u)
     n_neg = fac.negative_pivots()
     if n_neg == 0:
@@ -185,7 +190,11 @@ def _stability(model, q, u, fac, K):
     vals, vecs = smallest_eigenvalues(model, q, u, K)
     k = int(np.argmin(vals.real))
     lam = float(vals[k].real)
-    return lam >= 0.0, n_neg, lam, (vecs[:, k].real if lam < 0 else None)
+    mode = None
+    if lam < 0:
+        mode = np.zeros(model.n_free)
+        mode[: vecs.shape[0]] = vecs[:, k].real
+    return lam >= 0.0, n_neg, lam, mode
 
 
 STALE = 0.01
@@ -358,7 +367,8 @@ def stable_branch(model, q: np.ndarray, u: np.ndarray, mode: np.ndarray, tol: fl
     from .equilibrium import CONVERGED, solve_equilibrium
 
     F0 = model.F
-    scale = max(float(np.linalg.norm(F0[model.free])), float(np.linalg.norm(model.actuation_matrix(q).T @ u)))
+    scale = max(float(np.linalg.norm(F0[model.free])),
+                float(np.linalg.norm(model.actuation_rows(q).T @ model.intensities(q, u))))
     direction = np.zeros(model.n_dof)
     direction[model.free] = mode / np.linalg.norm(mode)
     no_penetration = AdmissibilitySettings(self_penetration=False, inversion=False)

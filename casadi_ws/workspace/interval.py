@@ -51,7 +51,7 @@ def default_step(model) -> float:
     centroid to the rest tip) / 48, rounded to 1, 2, 2.5, 4, 5 or 8 x 10^k m. The 195 mm trunk gets 4 mm, a
     20 mm finger 0.4 mm, a 1 m arm 20 mm: ~25-50 cells across a workspace that bends the robot by a fraction
     of its length."""
-    X = np.asarray(model.X).reshape(-1, 3)
+    X = model.mesh.nodes
     base = X[model.fixed_nodes].mean(axis=0) if len(model.fixed_nodes) else X.mean(axis=0)
     reach = float(np.linalg.norm(model.p0 - base)) or float(np.ptp(X, axis=0).max())
     raw = reach / STEPS_PER_REACH

@@ -41,8 +41,8 @@ def _tip_axis(model):
         # the elements holding the end effector: those with the most of its embedding nodes
         count = np.isin(tets, nodes).sum(axis=1)
         elems = np.flatnonzero(count == count.max())
-        base = model.X.reshape(-1, 3)[model.fixed_nodes].mean(axis=0) if len(model.fixed_nodes) else \
-            model.X.reshape(-1, 3).mean(axis=0)
+        X = model.mesh.nodes
+        base = X[model.fixed_nodes].mean(axis=0) if len(model.fixed_nodes) else X.mean(axis=0)
         axis = model.p0 - base
         axis = axis / max(np.linalg.norm(axis), 1e-300)
         model.deformation_gradients(np.zeros(model.n_dof))  # builds model._F_op
