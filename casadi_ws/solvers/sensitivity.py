@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["bounded_step", "closest_to_box", "curvature", "limited_step", "second_order", "sensitivity"]
+__all__ = ["bounded_step", "closest_to_box", "curvature", "input_range", "limited_step", "second_order", "sensitivity"]
 
 
 def sensitivity(model, q, fac, K=None) -> tuple[np.ndarray, np.ndarray]:
@@ -25,9 +25,56 @@ def sensitivity(model, q, fac, K=None) -> tuple[np.ndarray, np.ndarray]:
     K, steps = _refinement(fac, K)
     for _ in range(steps):
         S = S + fac.solve(HT - K @ S)
+    S = _taut(model, q, fac, S)
     # (C order, as a checkpoint restores it: the products with S then round the same way after a resume)
     S = np.ascontiguousarray(S)
     return model.C_free @ S, S
+
+
+def _taut(model, q, fac, S):
+    """The columns of slack cables (displacement-controlled, no tension) replaced by their sensitivity once
+    taut: a slack cable moves nothing until its motor has taken up the slack, then pulls like a taut one;
+    the zero column the tangent gives would hide that from the interval box and the Gauss-Newton step
+    (:func:`input_range` says from where the column applies). Woodbury's identity on the slack rows of the
+    tangent: M = K + E W^T, M^-1 B = Y - Z (I + W^T Z)^-1 W^T Y, Y = K^-1 B, Z = K^-1 E."""
+    rows = model.taut_rows(q) if hasattr(model, "taut_rows") else []
+    if not rows:
+        return S
+    n = model.n_free
+    E = np.zeros((n, len(rows)))
+    W = np.column_stack([w for _, _, w in rows])
+    B = np.zeros((n, len(rows)))
+    for c, (a, j, _) in enumerate(rows):
+        E[j, c] = 1.0
+        B[j, c] = model.kappa[j - model.n_free_mech]  # -dR/du of a taut cable's row
+    Y, Z = fac.solve(B), fac.solve(E)
+    X = Y - Z @ np.linalg.solve(np.eye(len(rows)) + W.T @ Z, W.T @ Y)
+    S = S.copy()
+    for c, (a, _, _) in enumerate(rows):
+        S[:, a] = X[:, c]
+    return S
+
+
+def input_range(model, q, u):
+    """(lo, hi, offset): the input steps that move the tip from the equilibrium (q, u), with their
+    sensitivities from :func:`sensitivity`. Usually lo = u_min - u, hi = u_max - u, offset 0. A slack cable
+    moves nothing until its motor has taken up the slack sigma = s(q) - u (s its shortening now), and
+    slackening it further moves nothing either: its steps are measured from there, lo = 0,
+    hi = u_max - s, and an effective step d > 0 is the input step sigma + d (:func:`applied_step`)."""
+    lo, hi = model.u_min - u, model.u_max - u
+    offset = np.zeros(model.n_u)
+    slack = model.slack(q) if hasattr(model, "slack") else np.zeros(model.n_u, dtype=bool)
+    if slack.any():
+        s = model.sign * (model.actuator_states(q) - model.rest_quantities)
+        offset[slack] = np.maximum(s[slack] - u[slack], 0.0)
+        lo = np.where(slack, 0.0, lo)
+        hi = np.where(slack, np.maximum(model.u_max - u - offset, 0.0), hi)
+    return lo, hi, offset
+
+
+def applied_step(du, offset):
+    """The input step that makes the effective step ``du`` of :func:`input_range`: slack taken up first."""
+    return du + np.where(du > 0, offset, 0.0)
 
 
 def _refinement(fac, K):
@@ -74,11 +121,16 @@ def curvature(model, q, u, S, fac, tip_step: float, K=None) -> np.ndarray:
         qm[model.free] -= dq
         return model.residual(qp, u + d) + model.residual(qm, u - d)
 
-    diag = [second_difference(h[i] * np.eye(n)[i]) for i in range(n)]
+    # a slack cable's column is its taut one (see _taut), which a small step does not follow: no curvature
+    slack = model.slack(q) if hasattr(model, "slack") else np.zeros(n, dtype=bool)
+    zero = np.zeros(S.shape[0])
+    diag = [zero if slack[i] else second_difference(h[i] * np.eye(n)[i]) for i in range(n)]
     cols = []
     for i in range(n):
         for j in range(i, n):
-            if i == j:
+            if slack[i] or slack[j]:
+                cols.append(zero)
+            elif i == j:
                 cols.append(diag[i] / h[i] ** 2)
             else:
                 d = np.zeros(n)

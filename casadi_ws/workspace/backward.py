@@ -26,7 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..solvers.equilibrium import CONVERGED, Factorization, solve_equilibrium, tangent_factorization
-from ..solvers.sensitivity import bounded_step, closest_to_box, limited_step, second_order, sensitivity
+from ..solvers.sensitivity import (applied_step, bounded_step, closest_to_box, input_range, limited_step, second_order,
+                                   sensitivity)
 from ..status import Status
 
 __all__ = ["BackwardResult", "BackwardSettings", "backward"]
@@ -116,20 +117,22 @@ def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardRe
     Q = sens[2] if sens is not None and len(sens) > 2 else None
     for it in range(1, settings.max_iterations + 1):
         A, S = sens[:2] if (it == 1 and sens is not None) else sensitivity(model, q, fac)
-        # bounded linear least squares for du: min |tip + A du - target|^2, u_min <= u + du <= u_max
-        du = bounded_step(A, target - tip, model.u_min - u, model.u_max - u)
+        # bounded linear least squares for du: min |tip + A du - target|^2, u_min <= u + du <= u_max (steps
+        # of a slack cable counted from where it pulls again: input_range)
+        lo, hi, offset = input_range(model, q, u)
+        du = bounded_step(A, target - tip, lo, hi)
         miss = np.abs(tip + A @ du - target).max()
         if settings.edge_box is not None and miss > 0.5 * scale:
-            du_box, _ = closest_to_box(A, target - tip, model.u_min - u, model.u_max - u, settings.edge_box * scale)
+            du_box, _ = closest_to_box(A, target - tip, lo, hi, settings.edge_box * scale)
             if np.abs(tip + A @ du_box - target).max() < miss:
                 du = du_box
-        du = _within_limits(model, q, u, A, S, target - tip, du)
+        du = _within_limits(model, q, A, S, target - tip, du, lo, hi)
         if not np.any(du):
             return BackwardResult(q, u, tip, SOLVED, it - 1, n_eq, n_fac, fac)
         if settings.give_up is not None and it > 1 and \
                 np.abs(tip + A @ du - target).max() > (0.5 + settings.give_up) * scale:
             return BackwardResult(q, u, tip, GAVE_UP, it - 1, n_eq, n_fac, fac)
-        u_new = u + du
+        u_new = np.clip(u + applied_step(du, offset), model.u_min, model.u_max)
         guess = q.copy()
         guess[model.free] += S @ du + (second_order(Q, du) if (it == 1 and Q is not None) else 0.0)
         eq = solve_equilibrium(model, u_new, q0=q, u0=u, guess=guess)
@@ -155,7 +158,7 @@ LIMIT_MARGIN = 0.02
 """Share of the distance to a state limit that a reduced backward step leaves (see :func:`_within_limits`)."""
 
 
-def _within_limits(model, q, u, A, S, r, du):
+def _within_limits(model, q, A, S, r, du, lo, hi):
     """The step kept within the problem's state limits (a cable's stroke, a chamber's volume), linearised at
     q: Q(u + du) ~ Q + dQ/dq S du (:func:`casadi_ws.solvers.sensitivity.limited_step`)."""
     lo, hi, names = model.quantity_limits
@@ -169,7 +172,7 @@ def _within_limits(model, q, u, A, S, r, du):
     with np.errstate(invalid="ignore"):  # unlimited sides stay infinite
         g_lo = np.where(np.isfinite(g_lo), g_lo + LIMIT_MARGIN * np.abs(g_lo), g_lo)
         g_hi = np.where(np.isfinite(g_hi), g_hi - LIMIT_MARGIN * np.abs(g_hi), g_hi)
-    return limited_step(A, r, model.u_min - u, model.u_max - u, G, g_lo, g_hi, du)
+    return limited_step(A, r, lo, hi, G, g_lo, g_hi, du)
 
 
 def backward_ipopt(model, target, q, u, settings):

@@ -37,7 +37,7 @@ from ..runtime.executor import Executor, deferred_interrupt, make_executor, one_
 from ..runtime.run_state import RunState, fingerprint
 from ..solvers.admissible import VIOLATIONS, admissibility, decode
 from ..solvers.equilibrium import CONVERGED, solve_equilibrium, tangent_factorization
-from ..solvers.sensitivity import bounded_step, closest_to_box, curvature, sensitivity
+from ..solvers.sensitivity import bounded_step, closest_to_box, curvature, input_range, sensitivity
 from ..status import Status
 from .backward import BackwardSettings, backward
 from .boundary import BoundarySettings, boundary
@@ -196,7 +196,8 @@ class Exploration:
 
     def interval_box(self, cfg):
         t = time.perf_counter()
-        box = interval_box(cfg.A, cfg.p, self.model.u_min - cfg.u, self.model.u_max - cfg.u)
+        lo, hi, _ = input_range(self.model, cfg.q, cfg.u)  # (9), slack cables counted from where they pull
+        box = interval_box(cfg.A, cfg.p, lo, hi)
         self.timings["step1_interval"] += time.perf_counter() - t
         return box
 
@@ -236,8 +237,7 @@ class Exploration:
 
     def _linear_gap(self, cfg, target, eta) -> float:
         """Infinity-norm distance from the target's cell to the linearised reachable set at cfg."""
-        m = self.model
-        lo, hi = m.u_min - cfg.u, m.u_max - cfg.u
+        lo, hi, _ = input_range(self.model, cfg.q, cfg.u)
         gap = np.abs(cfg.p + cfg.A @ bounded_step(cfg.A, target - cfg.p, lo, hi) - target).max() - 0.5 * eta
         if gap > 0 and self.bsettings.edge_box is not None:  # the centre is out of reach: any point of the cell?
             gap = min(gap, closest_to_box(cfg.A, target - cfg.p, lo, hi, 0.5 * eta)[1])
