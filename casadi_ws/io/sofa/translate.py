@@ -9,8 +9,9 @@ The rules, one per SOFA component (docs/sofa.md lists them with what each become
   points, ``PartialFixed(Projective)Constraint`` with its directions; indices given as a link to a
   ``BoxROI``/``SphereROI`` are selected here as SOFA would (bounds inclusive, in the scene's units);
 - cables: a ``CableConstraint``/``CableActuator`` on the points of its node's ``MechanicalObject``
-  (``indices``, ``pullPoint``, ``hasPullPoint``), bounds from ``minForce``/``maxForce`` or, displacement
-  controlled, from ``maxPositiveDisp`` (see :func:`translate`);
+  (``indices``, ``pullPoint``, ``hasPullPoint``); ``valueType`` force: tension bounds ``minForce``/``maxForce``;
+  displacement (SOFA's default): ``control: displacement``, shortening bounds ``-maxNegativeDisp`` and
+  ``maxPositiveDisp``;
 - cavities: a ``SurfacePressureConstraint`` on its node's surface loader (vertices embedded like SOFA's
   barycentric mapping), bounds ``minPressure``/``maxPressure``;
 - the end effector: the first ``PositionEffector`` point, else the centre of the body's far end;
@@ -217,14 +218,10 @@ def _units(scene: _Scene, units: str | None, notes: list) -> str:
     scene.fail(f"cannot tell the units from gravity's magnitude {mag:g} (9.81: m, 9810: mm); give --units")
 
 
-def translate(path: str | Path, units: str | None = None, out_dir: str | Path | None = None,
-              compliance_bounds: bool = True) -> Translation:
+def translate(path: str | Path, units: str | None = None, out_dir: str | Path | None = None) -> Translation:
     """The problem a SOFA scene describes (see the module's docstring for the rules).
 
     ``out_dir``: where the problem file will live (its mesh paths are written relative to it).
-    Displacement-controlled cables (SOFA's default ``valueType``) become tension-controlled here: with
-    ``compliance_bounds`` the tension bound is the one that shortens the cable by ``maxPositiveDisp`` in the
-    linear model at rest (one factorisation), and a note says so.
     """
     path = Path(path)
     scene = _Scene(record(path), path)
@@ -376,14 +373,22 @@ def translate(path: str | Path, units: str | None = None, out_dir: str | Path | 
 
     # --- what was not translated
     tr.untranslated = _leftovers(scene, used)
+    for i, name in disp:  # a stroke the scene leaves open: 10 % of the cable's rest length, said so
+        c = tr.problem["cables"][i]
+        pts = np.asarray(c["points"]) if "points" in c else None
+        if pts is None:
+            pts = X[np.asarray(c["indices"])] * L
+        line = np.vstack([c["pull_point"], pts]) if "pull_point" in c else pts
+        length = float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum())
+        c["u_max"] = float(f"{0.1 * length:.4g}")
+        notes.append(f"cable {name}: no maxPositiveDisp in the scene: a stroke of 10 % of its rest length "
+                     f"({c['u_max'] * 1e3:.4g} mm) assumed, edit u_max")
     from ..problem import ProblemError, problem_from_dict
 
     try:  # the file written must load: a rule that made a bad problem is the importer's bug, said as such
-        problem = problem_from_dict(tr.problem, f"{path} (translated)", out_dir)
+        problem_from_dict(tr.problem, f"{path} (translated)", out_dir)
     except ProblemError as exc:
         scene.fail(f"the translated problem is invalid: {exc.key}: {exc.message}")
-    if disp and compliance_bounds:
-        _compliance_bounds(tr, disp, problem)
     return tr
 
 
@@ -461,13 +466,19 @@ def _cable(scene, node, o, body, X, L, force, notes, tr, i, used, disp) -> dict:
             notes.append(f"cable {name}: force-controlled with no maxForce: u_max set to 1 N, edit it")
         entry["u_min"], entry["u_max"] = max(lo, 0.0) * force, hi * force
     else:
-        dmax = _num(o.data.get("maxPositiveDisp"))
+        # SOFA's default: the input is the cable's shortening; maxPositiveDisp bounds it, maxNegativeDisp
+        # bounds its lengthening
+        entry["control"] = "displacement"
+        dmax, dneg = _num(o.data.get("maxPositiveDisp")), _num(o.data.get("maxNegativeDisp"), 0.0)
+        entry["u_min"] = -dneg * L if dneg else 0.0
+        entry["u_max"] = None if dmax is None else dmax * L
         if dmax is None:
-            dmax = None
-        entry["u_min"], entry["u_max"] = 0.0, 1.0
-        disp.append((i, None if dmax is None else dmax * L, name))
-        comment.append(f"displacement-controlled in SOFA (maxPositiveDisp {o.data.get('maxPositiveDisp', 'unset')}, "
-                       f"minForce {o.data.get('minForce', 'unset')})")
+            disp.append((i, name))
+        comment.append(f"maxPositiveDisp {o.data.get('maxPositiveDisp', 'unset')}")
+        min_force = _num(o.data.get("minForce"))
+        if min_force not in (None, 0.0):
+            notes.append(f"cable {name}: minForce {min_force:g}: a cable here never pushes and goes slack at zero "
+                         f"tension (minForce 0)")
     tr.comments[f"cables[{i}]"] = "; ".join(comment)
     return entry
 
@@ -513,30 +524,6 @@ def _leftovers(scene: _Scene, used: set) -> list[str]:
                              f"{o.type}: unknown to the importer")
             groups.setdefault(label, []).append(o.path())
     return [f"{label} at {', '.join(paths)}" for label, paths in groups.items()]
-
-
-def _compliance_bounds(tr: Translation, disp: list, problem) -> None:
-    """Tension bounds of displacement-controlled cables from the linear compliance at rest."""
-    from ...fem.model import StaticModel
-    from ...solvers.equilibrium import factorize
-
-    model = StaticModel(problem, backend="casadi")
-    u0 = np.zeros(model.n_u)
-    _, K, _ = model.residual_and_tangent(np.zeros(model.n_dof), u0)
-    H = model.actuation_matrix(np.zeros(model.n_dof))
-    fac = factorize(K)
-    for i, dmax, name in disp:
-        c = float(H[i] @ fac.solve(H[i]))  # shortening per newton of tension, m/N
-        if dmax is None:
-            length = float(model.actuator_states(np.zeros(model.n_dof))[i])
-            dmax = 0.1 * length
-            tr.notes.append(f"cable {name}: no maxPositiveDisp in the scene: a stroke of 10 % of its rest length "
-                            f"({dmax * 1e3:.3g} mm) assumed")
-        T = dmax / c
-        tr.problem["cables"][i]["u_max"] = float(f"{T:.4g}")
-        tr.notes.append(f"cable {name}: displacement-controlled in SOFA; bounded here by tension: u_max = {T:.4g} N "
-                        f"shortens it by {dmax * 1e3:.4g} mm in the linear model at rest (compliance {c * 1e3:.4g} "
-                        f"mm/N) - an approximation")
 
 
 def _yaml(v) -> str:
