@@ -340,3 +340,47 @@ def test_format_bad_sofa_style_keys_are_one_line(tmp_path, keys, message):
     with pytest.raises(ProblemError) as exc:
         _problem(tmp_path, **keys)
     assert message in str(exc.value) and "\n" not in str(exc.value)
+
+
+@pytest.mark.parametrize("value_type", ["pressure", "volumeGrowth"])
+def test_a_pressure_cavity_scene_with_an_effector(tmp_path, value_type):
+    """SurfacePressureConstraint on a surface loader whose vertices are not mesh nodes (embedded, as SOFA
+    maps it), in pressure or volume growth, and a PositionEffector a hair off the mesh (snapped)."""
+    from casadi_ws.io.cavities import cavity_enclosing
+
+    mesh = load_mesh(REPO / "tests" / "meshes" / "hollow_sphere_4mm.vtu")  # metres: written back in mm
+    meshio.write(tmp_path / "ball.vtu", meshio.Mesh(mesh.nodes * 1e3, [("tetra", mesh.tets)]))
+    wall = cavity_enclosing(mesh, [0, 0, 0])
+    meshio.write(tmp_path / "cavity.stl", meshio.Mesh(wall.points * 1e3 * 0.998, [("triangle", wall.triangles)]),
+                 binary=True)
+    top = mesh.nodes[:, 2].max() * 1e3
+    bounds = "maxPressure=2, minPressure=0" if value_type == "pressure" else "maxVolumeGrowth=300"
+    body = f"""\
+    body.addObject('MeshVTKLoader', name='loader', filename='ball.vtu')
+    body.addObject('MechanicalObject')
+    body.addObject('TetrahedronFEMForceField', youngModulus=1000, poissonRatio=0.3)
+    body.addObject('BoxROI', name='base', box=[-30, -30, -30, 30, 30, -17])
+    body.addObject('FixedConstraint', indices='@base.indices')
+    cav = body.addChild('cavity')
+    cav.addObject('MeshSTLLoader', name='surf', filename='cavity.stl')
+    cav.addObject('MeshTopology', src='@surf')
+    cav.addObject('MechanicalObject')
+    cav.addObject('SurfacePressureConstraint', valueType='{value_type}', {bounds})
+    cav.addObject('BarycentricMapping')
+    eff = body.addChild('effector')
+    eff.addObject('MechanicalObject', position=[0, 0, {top + 0.05}])
+    eff.addObject('PositionEffector', indices=[0], effectorGoal=[0, 0, 30])
+    eff.addObject('BarycentricMapping')
+    """
+    tr = translate(_scene(tmp_path, body), out_dir=tmp_path)
+    p = _load(tr, tmp_path)
+    (cav,) = p.cavities
+    assert cav.nodes is None and cav.rest_volume() == pytest.approx(wall.rest_volume() * 0.998**3, rel=1e-9)
+    assert np.allclose(p.end_effector, [0, 0, top * 1e-3], atol=1e-9)  # moved onto the top of the ball
+    if value_type == "pressure":
+        assert cav.control == "pressure" and cav.u_max == pytest.approx(2000.0)  # 2 kPa in mm-kg-s
+    else:
+        assert cav.control == "volume" and cav.u_max == pytest.approx(300e-9)  # 300 mm^3
+    model = StaticModel(p)
+    eq = solve_equilibrium(model, 0.5 * model.u_max)
+    assert eq.converged and model.intensities(eq.q, eq.u)[0] > 0

@@ -13,7 +13,8 @@ The rules, one per SOFA component (docs/sofa.md lists them with what each become
   displacement (SOFA's default): ``control: displacement``, shortening bounds ``-maxNegativeDisp`` and
   ``maxPositiveDisp``;
 - cavities: a ``SurfacePressureConstraint`` on its node's surface loader (vertices embedded like SOFA's
-  barycentric mapping), bounds ``minPressure``/``maxPressure``;
+  barycentric mapping), bounds ``minPressure``/``maxPressure``, or with ``valueType`` volumeGrowth
+  ``control: volume`` and ``minVolumeGrowth``/``maxVolumeGrowth``;
 - the end effector: the first ``PositionEffector`` point, else the centre of the body's far end;
 - mass: ``UniformMass`` ``totalMass``/``vertexMass``, ``MeshMatrixMass``/``DiagonalMass`` ``massDensity``;
 - units: from gravity's magnitude (9.81: m-kg-s, 9810: mm-kg-s) unless given.
@@ -498,14 +499,19 @@ def _cavity(scene, node, o, L, stress, notes, tr, i, out_dir, used) -> dict:
             t["translation"] = [x * L for x in t["translation"]]
         entry["transform"] = t
     value_type = str(o.data.get("valueType", "pressure"))
-    lo, hi = _num(o.data.get("minPressure"), 0.0), _num(o.data.get("maxPressure"))
-    if value_type != "pressure":
-        notes.append(f"cavity {entry['name']}: valueType {value_type} (volume growth) is not translated: controlled "
-                     f"by pressure here")
-    if hi is None:
-        hi = 1e4 / stress
-        notes.append(f"cavity {entry['name']}: no maxPressure in the scene: u_max set to 10 kPa, edit it")
-    entry["u_min"], entry["u_max"] = lo * stress, hi * stress
+    if value_type == "volumeGrowth":
+        # the input is the chamber's volume growth (scene length units cubed), the pressure an unknown
+        entry["control"] = "volume"
+        lo, hi = _num(o.data.get("minVolumeGrowth"), 0.0), _num(o.data.get("maxVolumeGrowth"))
+        if hi is None:
+            scene.fail(f"{o.type} '{o.name}': valueType volumeGrowth needs maxVolumeGrowth (the input's bound)")
+        entry["u_min"], entry["u_max"] = lo * L**3, hi * L**3
+    else:
+        lo, hi = _num(o.data.get("minPressure"), 0.0), _num(o.data.get("maxPressure"))
+        if hi is None:
+            hi = 1e4 / stress
+            notes.append(f"cavity {entry['name']}: no maxPressure in the scene: u_max set to 10 kPa, edit it")
+        entry["u_min"], entry["u_max"] = lo * stress, hi * stress
     tr.comments[f"cavities[{i}]"] = f"{o.type} '{o.name}' at {node.path()}, surface {ld.type} '{ld.name}'"
     return entry
 
