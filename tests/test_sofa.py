@@ -384,3 +384,38 @@ def test_a_pressure_cavity_scene_with_an_effector(tmp_path, value_type):
     model = StaticModel(p)
     eq = solve_equilibrium(model, 0.5 * model.u_max)
     assert eq.converged and model.intensities(eq.q, eq.u)[0] > 0
+
+
+def test_the_stlib_finger_tutorial_builds_the_same_robot():
+    """FingerWithSTLIB.py builds the finger with stlib3's ElasticMaterialObject and VisualModel prefabs
+    (recorded by their stand-ins): same mesh and supports as Finger.py, its own mass and cable order."""
+    scene = FINGER.with_name("FingerWithSTLIB.py")
+    tr = translate(scene, out_dir=scene.parent)
+    p, ref = _load(tr, scene.parent), _load(translate(FINGER, out_dir=FINGER.parent), FINGER.parent)
+    assert p.mesh.n_nodes == ref.mesh.n_nodes and sorted(p.fixed_nodes) == sorted(ref.fixed_nodes)
+    assert p.material.density * p.mesh.volumes().sum() == pytest.approx(0.05)  # totalMass=0.05 in this one
+    assert p.cables[0].points[5].tolist() == pytest.approx([-0.0835, 0.0125, 0.0045])  # its own point order
+    assert any(l.startswith("LinearSolverConstraintCorrection: dynamics") for l in tr.untranslated)
+
+
+def test_stlib_fixed_box_and_softrobots_pulling_cable_placed_by_their_transform(tmp_path):
+    _, m = _box_file(tmp_path)
+    text = textwrap.dedent("""\
+        from stlib3.scene import MainHeader
+        from stlib3.physics.deformable import ElasticMaterialObject
+        from stlib3.physics.constraints import FixedBox
+        from softrobots.actuators import PullingCable
+        def createScene(root):
+            MainHeader(root, gravity=[0, 0, -9810])
+            body = ElasticMaterialObject(name='body', volumeMeshFileName='block.vtk', youngModulus=500,
+                                         poissonRatio=0.3, totalMass=0.01, attachedTo=root)
+            FixedBox(applyTo=body, atPositions=[-6, -6, -1, 6, 6, 0.1])
+            PullingCable(body, 'c', cableGeometry=[[0, 0, 5], [0, 0, 35]], translation=[4, 0, 0],
+                         pullPointLocation=[4, 0, 0], valueType='force')
+        """)
+    (tmp_path / "stlib.py").write_text(text)
+    tr = translate(tmp_path / "stlib.py", out_dir=tmp_path)
+    p = _load(tr, tmp_path)
+    assert sorted(p.fixed_nodes.tolist()) == np.flatnonzero(m.nodes[:, 2] <= 0.1).tolist()
+    assert np.allclose(p.cables[0].points, [[0.004, 0, 0.005], [0.004, 0, 0.035]])  # moved by 4 mm along x
+    assert p.material.young_modulus == pytest.approx(500e3) and np.allclose(p.gravity, [0, 0, -9.81])

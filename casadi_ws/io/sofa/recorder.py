@@ -31,10 +31,20 @@ class SceneError(ValueError):
 
 
 class Data:
-    """One data field of a recorded object or node: its value, and the link path SOFA would give it."""
+    """One data field of a recorded object or node: its value (written back to its owner when set), and
+    the link path SOFA would give it."""
 
     def __init__(self, owner, name: str, value=None):
-        self.owner, self.name, self.value = owner, name, value
+        self.__dict__.update(owner=owner, name=name)
+        owner.__dict__["data"].setdefault(name, value)
+
+    @property
+    def value(self):
+        return self.owner.__dict__["data"].get(self.name)
+
+    @value.setter
+    def value(self, v):
+        self.owner.__dict__["data"][self.name] = v.value if isinstance(v, Data) else v
 
     def getLinkPath(self) -> str:  # noqa: N802 (SOFA's name)
         return f"@{self.owner.path()}.{self.name}"
@@ -75,7 +85,7 @@ class Object:
 
     def findData(self, name):  # noqa: N802
         if name not in self.fields:
-            self.fields[name] = Data(self, name, self.data.get(name))
+            self.fields[name] = Data(self, name)
         return self.fields[name]
 
     def getLinkPath(self) -> str:  # noqa: N802
@@ -88,7 +98,6 @@ class Object:
 
     def __setattr__(self, name, value):
         self.data[name] = value.value if isinstance(value, Data) else value
-        self.findData(name).value = self.data[name]
 
     def init(self):
         pass
@@ -144,8 +153,7 @@ class Node:
         return self
 
     def findData(self, name):  # noqa: N802
-        d = Data(self, name, self.data.get(name))
-        return d
+        return Data(self, name)
 
     getData = findData
 
@@ -165,11 +173,14 @@ class Node:
             if o.name == name:
                 return o
         if name in self.data:
-            return Data(self, name, self.data[name])
+            return Data(self, name)
         raise AttributeError(f"node '{self.path() or '/'}' has no child, object or data named '{name}'")
 
     def __setattr__(self, name, value):
-        self.data[name] = value.value if isinstance(value, Data) else value
+        if isinstance(value, (Node, Object, Controller)) or callable(value):
+            self.__dict__[name] = value  # a prefab keeping its parts (self.loader = self.addObject(...))
+        else:
+            self.data[name] = value.value if isinstance(value, Data) else value
 
     def walk(self):
         """This node and all below it, depth first."""
@@ -269,7 +280,7 @@ def _stand_in_modules() -> dict[str, types.ModuleType]:
                          addFirstPath=noop, addLastPath=noop)))
     constants = _module("Sofa.constants", Key=key)
     sofa = _module("Sofa", Core=core, Simulation=simulation, Helper=helper, constants=constants,
-                   msg_info=noop, msg_warning=noop, msg_error=noop)
+                   msg_info=noop, msg_warning=noop, msg_error=noop, msg_deprecated=noop)
     runtime = _module("SofaRuntime", importPlugin=noop, PluginRepository=types.SimpleNamespace(addFirstPath=noop))
     numerics = _module("splib3.numerics", Vec3=_Vec3, Quat=_Quat, vec3=_module("splib3.numerics.vec3", Vec3=_Vec3),
                        quat=_module("splib3.numerics.quat", Quat=_Quat), sin=math.sin, cos=math.cos, to_radians=math.radians,
@@ -312,6 +323,9 @@ def record(path: str | Path) -> Node:
     if path.suffix.lower() == ".scn":
         return _parse_xml(path)
     modules = _stand_in_modules()
+    from .prefabs import stand_in_modules as prefab_modules
+
+    modules.update(prefab_modules(modules))
     spec = importlib.util.spec_from_loader(f"_casadi_ws_scene_{abs(hash(str(path)))}", loader=None)
     module = importlib.util.module_from_spec(spec)
     module.__file__ = str(path.resolve())
@@ -328,7 +342,8 @@ def record(path: str | Path) -> Node:
             raise
         except ModuleNotFoundError as exc:
             raise SceneError(f"{path}: imports '{exc.name}', which the SOFA stand-in does not provide (it "
-                             f"offers Sofa, SofaRuntime and splib3's numerics)") from None
+                             f"offers Sofa, SofaRuntime, splib3's numerics and the stlib3/softrobots prefabs of "
+                             f"docs/sofa.md)") from None
         except Exception as exc:  # the user's code: report where it failed, in one line
             tb = exc.__traceback__
             line = None
@@ -366,9 +381,8 @@ def _parse_xml(path: Path) -> Node:
                         sub.data[k] = _xml_value(v)
                 build(child, sub)
             else:
-                node.addObject(child.tag, **{k: (v if k in ("name", "filename", "src", "template", "method",
-                                                            "valueType", "indices") and k != "indices"
-                                                 else _xml_value(v)) for k, v in child.attrib.items()})
+                text = ("name", "filename", "src", "template", "method", "valueType")
+                node.addObject(child.tag, **{k: (v if k in text else _xml_value(v)) for k, v in child.attrib.items()})
 
     top = tree.getroot()
     root = Node(top.get("name", "root"))

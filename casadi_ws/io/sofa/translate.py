@@ -312,11 +312,12 @@ def translate(path: str | Path, units: str | None = None, out_dir: str | Path | 
 
     # --- fixed nodes
     fixed = []
-    for o in _objects(body, _FIXED):
+    # on the body's node or a child of it (stlib3's FixedBox adds a node with a BoxROI and springs)
+    for node, o in [(n, o) for n in body.walk() for o in _objects(n, _FIXED)]:
         used.add(id(o))
         key = "points" if o.type == "RestShapeSpringsForceField" else "indices"
         sel = o.data.get(key)
-        idx, how = _selection(scene, body, sel, X, used)
+        idx, how = _selection(scene, node, sel, X, used)
         if idx is not None:
             idx = [k for k in idx if k < len(in_tets) and in_tets[k]]  # SOFA also holds points no tet uses
         if idx is None:
@@ -447,6 +448,9 @@ def _cable(scene, node, o, body, X, L, force, notes, tr, i, used, disp) -> dict:
             scene.fail(f"{o.type} '{o.name}': its node {node.path()} has no MechanicalObject with positions")
         used.add(id(mo[0]))
         P = _flat_points(mo[0].data["position"])
+        placed = _transform(mo[0])  # a MechanicalObject's own rotation/translation/scale (PullingCable's)
+        if placed:
+            P = _apply(placed, P)
         idx = list(range(len(P))) if idx is None else idx
         if max(idx) >= len(P):
             scene.fail(f"{o.type} '{o.name}': index {max(idx)} but its MechanicalObject has {len(P)} points")
