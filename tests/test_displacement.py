@@ -121,6 +121,8 @@ def test_fb_in_shortenings_agrees_with_the_forward_cloud():
     slack = [model.slack(solve_equilibrium(model, u).q)[0] for u in fw.u[::97]]
     assert any(slack)
     assert strict_recall(fw, fb) >= 0.98
+    t = fb.maps()["intensities"]  # the tensions each point needs, as points.csv reports them
+    assert np.all(t > -1e-6) and t.max() > 10 and np.all(np.isfinite(fw.maps()["intensities"]))
     assert compare(fw, fb)["precision_within_one_cell"] >= 0.95
     for u, p in zip(fb.u[::5], fb.points[::5]):  # every FB point is an equilibrium at its shortenings
         eq = solve_equilibrium(model, u)

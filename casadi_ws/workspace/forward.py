@@ -264,7 +264,7 @@ def _check_line(model, line) -> tuple[np.ndarray, np.ndarray]:
     itself. The maps (:mod:`.maps`) come from the point's own LU; between Newton points steerability and
     compliance are interpolated linearly from them, the others computed at the point."""
     masks = np.zeros(len(line), dtype=np.int64)
-    maps = np.full((len(line), len(MAPS) + model.n_u), np.nan)
+    maps = np.full((len(line), len(MAPS) + 2 * model.n_u), np.nan)
     costly = encode(("unstable", "self_penetration"))
     done = np.zeros(len(line), dtype=bool)
     for j, eq in enumerate(line):
@@ -289,7 +289,7 @@ def _check_line(model, line) -> tuple[np.ndarray, np.ndarray]:
             m = point_maps(model, eq.q, eq.u, sensitivity(model, eq.q, fac)[0], fac)
         else:
             m = state_maps(model, eq.q, eq.u) | {"steerability": np.nan, "compliance": np.nan}
-        maps[j] = [m[name] for name in MAPS] + list(m["states"])
+        maps[j] = [m[name] for name in MAPS] + list(m["states"]) + list(m["intensities"])
     for j in np.flatnonzero(~done):
         if line[j].status != CONVERGED or not anchors.size:
             continue
@@ -314,7 +314,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
     status = np.zeros(n, dtype=int)
     residual = np.zeros(n)
     violations = np.zeros(n, dtype=np.int64)
-    maps = np.full((n, len(MAPS) + model.n_u), np.nan)
+    maps = np.full((n, len(MAPS) + 2 * model.n_u), np.nan)
     states = np.zeros((n, model.n_dof)) if settings.store_states else None
     counters = dict(solves=0, newton_iterations=0, factorizations=0, load_steps=0, restarts=0,
                     krylov_iterations=0, interpolated=0, interpolation_failed=0)
@@ -420,7 +420,7 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
     workers = max(1, min(int(workers), n // 50 or 1))
     fp = fingerprint("forward", model, {k: getattr(settings, k) for k in
                                         ("n_d", "predictor", "reuse_factorization", "krylov", "tol", "max_iter",
-                                         "store_states", "stride")} | {"workers": workers, "format": 3})
+                                         "store_states", "stride")} | {"workers": workers, "format": 4})
     run = RunState(checkpoint_dir, "forward", fp, resume, t0)
     try:
         if workers == 1:
@@ -460,7 +460,8 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
     arrays = dict(excluded_points=tips[excluded], excluded_u=us[excluded], excluded_violations=violations[excluded])
     for i, name in enumerate(MAPS):
         arrays[f"map_{name}"] = maps[ok, i]
-    arrays["map_states"] = maps[ok, len(MAPS):]
+    arrays["map_states"] = maps[ok, len(MAPS):len(MAPS) + model.n_u]
+    arrays["map_intensities"] = maps[ok, len(MAPS) + model.n_u:]
     return WorkspaceResult(
         method="forward", points=tips[ok], u=us[ok], failed_u=us[~converged], failed_status=status[~converged],
         failed_residual=residual[~converged], states=states[ok] if states is not None else None,

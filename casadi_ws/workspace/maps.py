@@ -75,7 +75,7 @@ def state_maps(model, q, u) -> dict:
     d = direction(model, q)
     axis = _tip_axis(model)[2]
     return {"effort": float(effort(model, u)[0]), "tilt": float(np.degrees(np.arccos(np.clip(d @ axis, -1.0, 1.0)))),
-            "direction": d, "states": model.actuator_states(q)}
+            "direction": d, "states": model.actuator_states(q), "intensities": model.intensities(q, u)}
 
 
 def stack(maps: list[dict], n_u: int) -> dict:
@@ -85,6 +85,7 @@ def stack(maps: list[dict], n_u: int) -> dict:
     out["compliance_matrix"] = np.full((k, 3, 3), np.nan)
     out["direction"] = np.full((k, 3), np.nan)
     out["states"] = np.full((k, n_u), np.nan)
+    out["intensities"] = np.full((k, n_u), np.nan)
     for i, m in enumerate(maps):
         if m is None:
             continue

@@ -171,7 +171,8 @@ class WorkspaceResult:
         """The point maps (:mod:`casadi_ws.workspace.maps`) as arrays, NaN where not computed."""
         k, n_u = self.n_points, (self.u.shape[1] if self.u.ndim == 2 else 0)
         out = {name: np.asarray(self.arrays.get(f"map_{name}", np.full(k, np.nan)), float) for name in MAPS}
-        out["states"] = np.asarray(self.arrays.get("map_states", np.full((k, n_u), np.nan)), float).reshape(k, n_u)
+        for key in ("states", "intensities"):
+            out[key] = np.asarray(self.arrays.get(f"map_{key}", np.full((k, n_u), np.nan)), float).reshape(k, n_u)
         return out
 
     def _save_failures_csv(self, path: Path) -> None:
@@ -201,6 +202,7 @@ class WorkspaceResult:
             data[name] = maps[name]
         for i in range(maps["states"].shape[1]):
             data[f"state{i + 1}"] = maps["states"][:, i]
+            data[f"intensity{i + 1}"] = maps["intensities"][:, i]
         return data
 
     def _save_points_csv(self, path: Path) -> None:
@@ -209,12 +211,13 @@ class WorkspaceResult:
         n_u = self.u.shape[1] if self.u.ndim == 2 else 0
         maps = self.maps()
         head = ",".join(["x", "y", "z"] + [f"u{i + 1}" for i in range(n_u)] + ["stable", "admissible", "violations"]
-                        + list(MAPS) + [f"state{i + 1}" for i in range(n_u)])
+                        + list(MAPS) + [f"state{i + 1}" for i in range(n_u)]
+                        + [f"intensity{i + 1}" for i in range(n_u)])
         data = np.hstack([self.points, self.u.reshape(self.n_points, n_u), self.stable[:, None],
                           self.admissible[:, None], self._violations()[:, None],
-                          np.column_stack([maps[name] for name in MAPS]), maps["states"]])
+                          np.column_stack([maps[name] for name in MAPS]), maps["states"], maps["intensities"]])
         np.savetxt(path, data, delimiter=",", header=head, comments="",
-                   fmt=["%.10g"] * (3 + n_u) + ["%d"] * 3 + ["%.6g"] * (len(MAPS) + n_u))
+                   fmt=["%.10g"] * (3 + n_u) + ["%d"] * 3 + ["%.6g"] * (len(MAPS) + n_u) + ["%.10g"] * n_u)
 
     def _save_cells(self, path: Path) -> None:
         """The reached cells (forward-backward's W_E) as hexahedra, the cell's point's maps as cell data."""
