@@ -271,7 +271,7 @@ def test_bad_scenes_give_one_line_and_exit_2(tmp_path):
     _box_file(tmp_path)
     cases = {
         "no_create.py": ("x = 1\n", "defines no createScene"),
-        "imports.py": ("import stlib3.physics\ndef createScene(root):\n    pass\n", "imports 'stlib3'"),
+        "imports.py": ("import stlib3.animation\ndef createScene(root):\n    pass\n", "imports 'stlib3.animation'"),
         "raises.py": ("def createScene(root):\n    root.nothing.addObject('A')\n", "createScene failed (line 2)"),
         "no_body.py": ("def createScene(root):\n    root.addObject('FreeMotionAnimationLoop')\n",
                        "no node holds a TetrahedronFEMForceField"),
@@ -419,3 +419,22 @@ def test_stlib_fixed_box_and_softrobots_pulling_cable_placed_by_their_transform(
     assert sorted(p.fixed_nodes.tolist()) == np.flatnonzero(m.nodes[:, 2] <= 0.1).tolist()
     assert np.allclose(p.cables[0].points, [[0.004, 0, 0.005], [0.004, 0, 0.035]])  # moved by 4 mm along x
     assert p.material.young_modulus == pytest.approx(500e3) and np.allclose(p.gravity, [0, 0, -9.81])
+
+
+def test_a_stiff_layer_on_a_sub_topology_adds_its_stiffness(tmp_path):
+    """A second TetrahedronFEMForceField on a BoxROI's tetrahedraInROI (a strain-limiting layer, as in
+    SoftRobots' PneuNets gripper) becomes a material region whose Lame parameters are the sum."""
+    _, m = _box_file(tmp_path)
+    extra = """\
+    layer = body.addChild('layer')
+    body.addObject('BoxROI', name='bottom', box=[-6, -6, -1, 6, 0, 41])
+    layer.addObject('TetrahedronSetTopologyContainer', tetrahedra='@../bottom.tetrahedraInROI')
+    layer.addObject('TetrahedronFEMForceField', youngModulus=1500, poissonRatio=0.3)
+    """
+    tr = translate(_scene(tmp_path, _BODY.format(transform=""), extra), out_dir=tmp_path)
+    p = _load(tr, tmp_path)
+    (tets, region), = p.regions
+    assert region.young_modulus == pytest.approx(2000e3) and region.poisson_ratio == pytest.approx(0.3)  # 500 + 1500
+    centroids = m.nodes[m.tets].mean(axis=1)
+    assert sorted(tets.tolist()) == np.flatnonzero(centroids[:, 1] <= 0).tolist()
+    assert not any("bodies" in n for n in tr.notes)  # a layer, not a second body

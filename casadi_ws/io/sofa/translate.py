@@ -137,7 +137,8 @@ class _Scene:
             return link.owner if isinstance(link.owner, Object) else None
         if not isinstance(link, str) or not link.startswith("@"):
             return None
-        target = link[1:].split(".")[0]
+        head, _, last = link[1:].rpartition("/")  # '@../roi.indices': the data name follows the last '.'
+        target = f"{head}/{last.split('.')[0]}" if head or link[1:].startswith("/") else last.split(".")[0]
         parts = [p for p in target.split("/") if p]
         node = self.root if target.startswith("/") else here
         for p in parts[:-1]:
@@ -231,10 +232,12 @@ def translate(path: str | Path, units: str | None = None, out_dir: str | Path | 
     notes = tr.notes
     tr.units = _units(scene, units, notes)
     L, M = UNIT_SYSTEMS[tr.units]
+    scene.length = L
     force, stress = M * L, M / L  # N per force unit, Pa per stress unit
     used: set[int] = set()
 
-    bodies = [n for n in scene.nodes if _objects(n, _FEM)]
+    # a body: a node with a FEM force field under no other such node (one below a body is a layer of it)
+    bodies = [n for n in scene.nodes if _objects(n, _FEM) and not any(_objects(a, _FEM) for a in _ancestors(n))]
     if not bodies:
         scene.fail("no node holds a TetrahedronFEMForceField (or TetrahedronHyperelasticityFEMForceField): no "
                    "deformable body to translate")
@@ -306,6 +309,10 @@ def translate(path: str | Path, units: str | None = None, out_dir: str | Path | 
         if mass.type == "UniformMass":
             notes.append("UniformMass: its total mass is spread by volume (a consistent mass), not equally per node")
     tr.problem["material"] = material
+    regions = _layers(scene, body, fem, material, stress, used, notes)
+    if regions:
+        tr.problem["material_regions"] = regions
+        tr.comments["material_regions"] = "force fields on sub-topologies (stiff layers): their stiffness adds to the body's"
 
     g = scene.root.data.get("gravity")
     tr.problem["gravity"] = (_flat_points(g)[0] * L if g is not None else np.array([0, -9.81, 0])).tolist()
@@ -392,6 +399,42 @@ def translate(path: str | Path, units: str | None = None, out_dir: str | Path | 
     except ProblemError as exc:
         scene.fail(f"the translated problem is invalid: {exc.key}: {exc.message}")
     return tr
+
+
+def _lame(E, nu):
+    return E / (2 * (1 + nu)), E * nu / ((1 + nu) * (1 - 2 * nu))
+
+
+def _layers(scene, body, fem, material, stress, used, notes) -> list[dict]:
+    """A second TetrahedronFEMForceField on a sub-topology of the body (its tetrahedra a BoxROI's
+    ``tetrahedraInROI``: a strain-limiting layer) adds its stiffness there: a material region, one per box,
+    whose Lame parameters are the sums (exact for linear and corotational laws). A box holds the
+    tetrahedra whose centroid is in it, as BoxROI's tetrahedraInROI and material_regions both decide."""
+    regions = []
+    for node in list(body.walk())[1:]:
+        for o in _objects(node, _FEM):
+            used.add(id(o))
+            topo = next((t for t in node.objects if t.type in _ABSORBED and t.type != "MechanicalObject"
+                         and any(str(t.data.get(k, "")).endswith("tetrahedraInROI") for k in ("tetrahedra", "tetras"))),
+                        None)
+            link = None if topo is None else next(str(topo.data[k]) for k in ("tetrahedra", "tetras")
+                                                  if str(topo.data.get(k, "")).endswith("tetrahedraInROI"))
+            roi = scene.find(link, node) if link else None
+            if roi is None or roi.type != "BoxROI":
+                notes.append(f"{o.type} '{o.name}' at {node.path()}: its tetrahedra are not a BoxROI's "
+                             f"tetrahedraInROI, so it is not translated (a second force field on a sub-topology)")
+                continue
+            used.add(id(topo))
+            used.add(id(roi))
+            E2, nu2 = _num(o.data.get("youngModulus"), 5000.0) * stress, _num(o.data.get("poissonRatio"), 0.45)
+            mu, lam = (a + b for a, b in zip(_lame(material["young_modulus"], material["poisson_ratio"]), _lame(E2, nu2)))
+            E, nu = mu * (3 * lam + 2 * mu) / (lam + mu), lam / (2 * (lam + mu))
+            for b in _flat_points(roi.data.get("box", [])).reshape(-1, 6):
+                regions.append({"box": (b * scene.length).reshape(2, 3).tolist(), "young_modulus": float(f"{E:.6g}"),
+                                "poisson_ratio": float(f"{nu:.6g}")})
+            notes.append(f"{o.type} '{o.name}' at {node.path()} on BoxROI '{roi.name}': a layer of E = {E2:.4g} Pa, "
+                         f"nu = {nu2:g} added to the body's there (E = {E:.4g} Pa, nu = {nu:.4g})")
+    return regions
 
 
 def _far_axis(X: np.ndarray, fixed_idx: np.ndarray) -> str:
