@@ -226,60 +226,81 @@ def translate(path: str | Path, units: str | None = None, out_dir: str | Path | 
     ``out_dir``: where the problem file will live (its mesh paths are written relative to it).
     """
     path = Path(path)
-    scene = _Scene(record(path), path)
-    out_dir = Path(out_dir) if out_dir is not None else Path.cwd()
-    tr = Translation({}, units="")
-    notes = tr.notes
-    tr.units = _units(scene, units, notes)
-    L, M = UNIT_SYSTEMS[tr.units]
-    scene.length = L
-    force, stress = M * L, M / L  # N per force unit, Pa per stress unit
-    used: set[int] = set()
+    sc = _Scene(record(path), path)
+    sc.out_dir = Path(out_dir) if out_dir is not None else Path.cwd()
+    sc.tr = tr = Translation({}, units="")
+    tr.units = _units(sc, units, tr.notes)
+    sc.length, M = UNIT_SYSTEMS[tr.units]
+    sc.mass, sc.force, sc.stress = M, M * sc.length, M / sc.length  # kg, N, Pa per scene unit
+    sc.used = set()
+    tr.problem["name"] = path.stem
+    tr.problem["description"] = f"Imported from the SOFA scene {path.name} by casadi-ws import-sofa."
+    _body_mesh(sc)
+    _material(sc)
+    g = sc.root.data.get("gravity")
+    tr.problem["gravity"] = (_flat_points(g)[0] * sc.length if g is not None else np.array([0, -9.81, 0])).tolist()
+    _fixed(sc)
+    _actuators(sc)
+    _effector(sc)
+    tr.untranslated = _leftovers(sc, sc.used)
+    _open_strokes(sc)
+    from ..problem import ProblemError, problem_from_dict
 
-    # a body: a node with a FEM force field under no other such node (one below a body is a layer of it)
-    bodies = [n for n in scene.nodes if _objects(n, _FEM) and not any(_objects(a, _FEM) for a in _ancestors(n))]
+    try:  # the file written must load: a rule that made a bad problem is the importer's bug, said as such
+        problem_from_dict(tr.problem, f"{path} (translated)", sc.out_dir)
+    except ProblemError as exc:
+        sc.fail(f"the translated problem is invalid: {exc.key}: {exc.message}")
+    return tr
+
+
+def _body_mesh(sc: _Scene) -> None:
+    """The body (a node with a FEM force field under no other such node: one below a body is a layer of
+    it) and its mesh: ``sc.body``, ``sc.X`` (its points in scene units, placed as SOFA's MechanicalObject
+    holds them), ``sc.in_tets`` (the points some tetrahedron uses)."""
+    tr, L = sc.tr, sc.length
+    bodies = [n for n in sc.nodes if _objects(n, _FEM) and not any(_objects(a, _FEM) for a in _ancestors(n))]
     if not bodies:
-        scene.fail("no node holds a TetrahedronFEMForceField (or TetrahedronHyperelasticityFEMForceField): no "
-                   "deformable body to translate")
-    body = bodies[0]
+        sc.fail("no node holds a TetrahedronFEMForceField (or TetrahedronHyperelasticityFEMForceField): no "
+                "deformable body to translate")
+    sc.body = bodies[0]
     if len(bodies) > 1:
-        notes.append(f"{len(bodies)} deformable bodies; translated the first, {body.path()} (the others: "
-                     f"{', '.join(b.path() for b in bodies[1:])})")
-    loaders = [o for o in body.objects if o.type in _LOADERS and o.data.get("filename")]
+        tr.notes.append(f"{len(bodies)} deformable bodies; translated the first, {sc.body.path()} (the others: "
+                        f"{', '.join(b.path() for b in bodies[1:])})")
+    loaders = [o for o in sc.body.objects if o.type in _LOADERS and o.data.get("filename")]
     if not loaders:
-        scene.fail(f"body node {body.path()} has no mesh loader with a filename")
+        sc.fail(f"body node {sc.body.path()} has no mesh loader with a filename")
     loader = loaders[0]
-    pts, mesh_file, transform, raw = _loader_points(scene, loader, L)
-    in_tets = np.zeros(len(pts), bool)
+    pts, mesh_file, transform, raw = _loader_points(sc, loader, L)
+    sc.in_tets = np.zeros(len(pts), bool)
     for c in raw.cells:
         if c.type in ("tetra", "tetra10"):
-            in_tets[np.asarray(c.data).ravel()] = True
-    used.add(id(loader))
-    rel = os.path.relpath(mesh_file.resolve(), out_dir.resolve())
-    mesh = {"file": rel, "scale": L}
+            sc.in_tets[np.asarray(c.data).ravel()] = True
+    sc.used.add(id(loader))
+    mesh = {"file": os.path.relpath(mesh_file.resolve(), sc.out_dir.resolve()), "scale": L}
     if transform:
         t = dict(transform)
         if "translation" in t:
             t["translation"] = [x * L for x in t["translation"]]
         mesh["transform"] = t
-    tr.problem["name"] = path.stem
-    tr.problem["description"] = f"Imported from the SOFA scene {path.name} by casadi-ws import-sofa."
     tr.problem["mesh"] = mesh
     tr.comments["mesh"] = f"{loader.type} '{loader.name}' ({tr.units.split('-')[0]} -> m)"
-    X = _apply(transform, pts) if transform else pts  # scene units, as SOFA's MechanicalObject holds them
+    sc.X = _apply(transform, pts) if transform else pts
 
-    # --- material
+
+def _material(sc: _Scene) -> None:
+    """The body's law and constants, its mass, and the layers on its sub-topologies."""
+    tr, body, stress, notes = sc.tr, sc.body, sc.stress, sc.tr.notes
     fem = _objects(body, _FEM)[0]
-    used.add(id(fem))
+    sc.used.add(id(fem))
     if fem.type == "TetrahedronHyperelasticityFEMForceField":
         law = str(fem.data.get("materialName", "NeoHookean"))
         if law.lower() not in ("neohookean", "stablenehookean", "stableneohookean"):
-            scene.fail(f"{fem.type} materialName {law!r}: only NeoHookean is available here")
+            sc.fail(f"{fem.type} materialName {law!r}: only NeoHookean is available here")
         ps = fem.data.get("ParameterSet")
         p = np.asarray([float(x) for x in ps.replace(",", " ").split()] if isinstance(ps, str)
                        else np.ravel(ps if ps is not None else []), dtype=float)
         if p.size < 2 or np.any(p[:2] <= 0):
-            scene.fail(f"{fem.type} '{fem.name}': ParameterSet {ps!r}: expected mu and K, both > 0")
+            sc.fail(f"{fem.type} '{fem.name}': ParameterSet {ps!r}: expected mu and K, both > 0")
         mu, K = p[0] * stress, p[1] * stress
         E, nu = 9 * K * mu / (3 * K + mu), (3 * K - 2 * mu) / (2 * (3 * K + mu))
         material = {"model": "neohookean", "young_modulus": float(f"{E:.6g}"), "poisson_ratio": float(f"{nu:.6g}")}
@@ -298,107 +319,104 @@ def translate(path: str | Path, units: str | None = None, out_dir: str | Path | 
                                    f"({'kPa' if stress == 1e3 else f'x {stress:g} Pa'})")
     masses = _objects(body, _MASSES)
     if masses:
-        mass = masses[0]
-        used.add(id(mass))
+        mass, M, L = masses[0], sc.mass, sc.length
+        sc.used.add(id(mass))
         if mass.data.get("totalMass") is not None:
             material["total_mass"] = _num(mass.data["totalMass"]) * M
         elif mass.data.get("vertexMass") is not None:
-            material["total_mass"] = _num(mass.data["vertexMass"]) * M * len(pts)
+            material["total_mass"] = _num(mass.data["vertexMass"]) * M * len(sc.X)
         elif mass.data.get("massDensity") is not None:
             material["density"] = _num(mass.data["massDensity"]) * M / L ** 3
         if mass.type == "UniformMass":
             notes.append("UniformMass: its total mass is spread by volume (a consistent mass), not equally per node")
     tr.problem["material"] = material
-    regions = _layers(scene, body, fem, material, stress, used, notes)
+    regions = _layers(sc, body, fem, material, stress, sc.used, notes)
     if regions:
         tr.problem["material_regions"] = regions
         tr.comments["material_regions"] = "force fields on sub-topologies (stiff layers): their stiffness adds to the body's"
 
-    g = scene.root.data.get("gravity")
-    tr.problem["gravity"] = (_flat_points(g)[0] * L if g is not None else np.array([0, -9.81, 0])).tolist()
 
-    # --- fixed nodes
-    fixed = []
-    # on the body's node or a child of it (stlib3's FixedBox adds a node with a BoxROI and springs)
-    for node, o in [(n, o) for n in body.walk() for o in _objects(n, _FIXED)]:
-        used.add(id(o))
+def _fixed(sc: _Scene) -> None:
+    """The supports on the body's node or a child of it (stlib3's FixedBox adds a node with a BoxROI and
+    springs): ``sc.fixed`` as (entry, comment) pairs."""
+    tr, fixed = sc.tr, []
+    for node, o in [(n, o) for n in sc.body.walk() for o in _objects(n, _FIXED)]:
+        sc.used.add(id(o))
         key = "points" if o.type == "RestShapeSpringsForceField" else "indices"
         sel = o.data.get(key)
-        idx, how = _selection(scene, node, sel, X, used)
-        if idx is not None:
-            idx = [k for k in idx if k < len(in_tets) and in_tets[k]]  # SOFA also holds points no tet uses
+        idx, how = _selection(sc, node, sel, sc.X, sc.used)
         if idx is None:
             if sel is None and o.type == "RestShapeSpringsForceField":
-                scene.fail(f"{o.type} '{o.name}' holds every node (no points): nothing would move")
-            scene.fail(f"{o.type} '{o.name}': cannot resolve its {key} {sel!r}")
-        entry = {"indices": idx}
+                sc.fail(f"{o.type} '{o.name}' holds every node (no points): nothing would move")
+            sc.fail(f"{o.type} '{o.name}': cannot resolve its {key} {sel!r}")
+        entry = {"indices": [k for k in idx if k < len(sc.in_tets) and sc.in_tets[k]]}  # SOFA holds unused points too
         dirs = o.data.get("fixedDirections")
         if o.type.startswith("PartialFixed") and dirs is not None:
             comps = [c for c, d in zip("xyz", _ints(dirs)) if d]
             if comps != ["x", "y", "z"]:
                 entry["components"] = comps
         if o.type == "RestShapeSpringsForceField":
-            notes.append(f"{o.type} '{o.name}' (stiffness {o.data.get('stiffness', '?')}) translated as fixed nodes")
+            tr.notes.append(f"{o.type} '{o.name}' (stiffness {o.data.get('stiffness', '?')}) translated as fixed nodes")
         fixed.append((entry, f"{o.type} '{o.name}': {how}"))
     if not fixed:
-        scene.fail(f"no FixedConstraint, RestShapeSpringsForceField or PartialFixedConstraint on {body.path()}: the "
-                   f"body is not held")
+        sc.fail(f"no FixedConstraint, RestShapeSpringsForceField or PartialFixedConstraint on {sc.body.path()}: the "
+                f"body is not held")
     tr.problem["fixed"] = [e for e, _ in fixed]
     for i, (_, c) in enumerate(fixed):
         tr.comments[f"fixed[{i}]"] = c
+    sc.fixed = fixed
 
-    # --- actuators
-    cables, cavities, disp = [], [], []
-    for node in scene.nodes:
+
+def _actuators(sc: _Scene) -> None:
+    tr, cables, cavities = sc.tr, [], []
+    sc.open_strokes = []
+    for node in sc.nodes:
         for o in _objects(node, _CABLES):
-            used.add(id(o))
-            cables.append(_cable(scene, node, o, body, X, L, force, notes, tr, len(cables), used, disp))
+            sc.used.add(id(o))
+            cables.append(_cable(sc, node, o, sc.body, sc.X, sc.length, sc.force, tr.notes, tr, len(cables), sc.used,
+                                 sc.open_strokes))
         for o in _objects(node, _CAVITIES):
-            used.add(id(o))
-            cavities.append(_cavity(scene, node, o, L, stress, notes, tr, len(cavities), out_dir, used))
+            sc.used.add(id(o))
+            cavities.append(_cavity(sc, node, o, sc.length, sc.stress, tr.notes, tr, len(cavities), sc.out_dir,
+                                    sc.used))
     if not cables and not cavities:
-        scene.fail("no CableConstraint or SurfacePressureConstraint: nothing actuates the robot")
+        sc.fail("no CableConstraint or SurfacePressureConstraint: nothing actuates the robot")
     if cables:
         tr.problem["cables"] = cables
     if cavities:
         tr.problem["cavities"] = cavities
 
-    # --- end effector
-    eff = [(n, o) for n in scene.nodes for o in _objects(n, ("PositionEffector",))]
+
+def _effector(sc: _Scene) -> None:
+    """The first PositionEffector's point, else the centre of the body's end farthest from its support."""
+    tr, X = sc.tr, sc.X
+    eff = [(n, o) for n in sc.nodes for o in _objects(n, ("PositionEffector",))]
     if eff:
         n, o = eff[0]
         mo = _objects(n, ("MechanicalObject",))
         p = _flat_points(mo[0].data.get("position"))[_ints(o.data.get("indices", [0]))[0]] if mo else None
         if p is not None:
             size = float(np.linalg.norm(X.max(0) - X.min(0)))
-            tr.problem["end_effector"] = {"point": (p * L).tolist(), "snap": 0.01 * size * L}
+            tr.problem["end_effector"] = {"point": (p * sc.length).tolist(), "snap": 0.01 * size * sc.length}
             tr.comments["end_effector"] = f"PositionEffector '{o.name}' (moved onto the mesh if within 1 % of its size)"
-    if "end_effector" not in tr.problem:
-        held = [np.asarray(e["indices"]) for e, _ in fixed if "components" not in e] or \
-            [np.asarray(e["indices"]) for e, _ in fixed]
-        axis = _far_axis(X, np.unique(np.concatenate(held)))
-        tr.problem["end_effector"] = {"tip": {"axis": axis}}
-        tr.comments["end_effector"] = f"no PositionEffector: the centre of the body's end farthest from its support ({axis})"
+            return
+    held = [np.asarray(e["indices"]) for e, _ in sc.fixed if "components" not in e] or \
+        [np.asarray(e["indices"]) for e, _ in sc.fixed]
+    axis = _far_axis(X, np.unique(np.concatenate(held)))
+    tr.problem["end_effector"] = {"tip": {"axis": axis}}
+    tr.comments["end_effector"] = f"no PositionEffector: the centre of the body's end farthest from its support ({axis})"
 
-    # --- what was not translated
-    tr.untranslated = _leftovers(scene, used)
-    for i, name in disp:  # a stroke the scene leaves open: 10 % of the cable's rest length, said so
-        c = tr.problem["cables"][i]
-        pts = np.asarray(c["points"]) if "points" in c else None
-        if pts is None:
-            pts = X[np.asarray(c["indices"])] * L
+
+def _open_strokes(sc: _Scene) -> None:
+    """A stroke the scene leaves open (no maxPositiveDisp): 10 % of the cable's rest length, in a note."""
+    for i, name in sc.open_strokes:
+        c = sc.tr.problem["cables"][i]
+        pts = np.asarray(c["points"]) if "points" in c else sc.X[np.asarray(c["indices"])] * sc.length
         line = np.vstack([c["pull_point"], pts]) if "pull_point" in c else pts
         length = float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum())
         c["u_max"] = float(f"{0.1 * length:.4g}")
-        notes.append(f"cable {name}: no maxPositiveDisp in the scene: a stroke of 10 % of its rest length "
-                     f"({c['u_max'] * 1e3:.4g} mm) assumed, edit u_max")
-    from ..problem import ProblemError, problem_from_dict
-
-    try:  # the file written must load: a rule that made a bad problem is the importer's bug, said as such
-        problem_from_dict(tr.problem, f"{path} (translated)", out_dir)
-    except ProblemError as exc:
-        scene.fail(f"the translated problem is invalid: {exc.key}: {exc.message}")
-    return tr
+        sc.tr.notes.append(f"cable {name}: no maxPositiveDisp in the scene: a stroke of 10 % of its rest length "
+                           f"({c['u_max'] * 1e3:.4g} mm) assumed, edit u_max")
 
 
 def _lame(E, nu):
