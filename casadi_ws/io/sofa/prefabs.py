@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import types
 
-from .recorder import Node
+from .api import Node
 
 __all__ = ["Prefab", "stand_in_modules"]
 

@@ -1,8 +1,8 @@
 """A recording stand-in for SOFA's Python API: run a scene's ``createScene`` with no SOFA installed.
 
 ``record(path)`` executes the scene file (``.py`` / ``.pyscn``) with modules ``Sofa``, ``Sofa.Core``,
-``Sofa.Simulation``, ``Sofa.Helper``, ``Sofa.constants``, ``SofaRuntime`` and the numerics of ``splib3``
-replaced by the small classes below, calls its ``createScene(root)``, and returns the recorded graph: nodes
+``Sofa.Simulation``, ``Sofa.Helper``, ``Sofa.constants``, ``SofaRuntime``, the numerics of ``splib3`` and
+the stlib3/softrobots prefabs replaced by stand-ins (:mod:`.api`, :mod:`.prefabs`), calls its ``createScene(root)``, and returns the recorded graph: nodes
 with their children and objects, each object its SOFA type and its data as given. Nothing is simulated; a
 data a scene reads back (``node.roi.indices``) is a :class:`Data` whose ``getLinkPath()`` gives the
 ``@path.name`` link SOFA would resolve. ``.scn`` XML scenes are parsed into the same graph.
@@ -15,282 +15,14 @@ from __future__ import annotations
 import contextlib
 import importlib.util
 import io
-import math
 import sys
-import types
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-import numpy as np
+from .api import Data, Node, Object, SceneError, stand_in_modules
+from .prefabs import stand_in_modules as prefab_modules
 
 __all__ = ["Data", "Node", "Object", "SceneError", "record"]
-
-
-class SceneError(ValueError):
-    """A scene that cannot be recorded or translated; ``str()`` is one line naming the scene."""
-
-
-class Data:
-    """One data field of a recorded object or node: its value (written back to its owner when set), and
-    the link path SOFA would give it."""
-
-    def __init__(self, owner, name: str, value=None):
-        self.__dict__.update(owner=owner, name=name)
-        owner.__dict__["data"].setdefault(name, value)
-
-    @property
-    def value(self):
-        return self.owner.__dict__["data"].get(self.name)
-
-    @value.setter
-    def value(self, v):
-        self.owner.__dict__["data"][self.name] = v.value if isinstance(v, Data) else v
-
-    def getLinkPath(self) -> str:  # noqa: N802 (SOFA's name)
-        return f"@{self.owner.path()}.{self.name}"
-
-    linkpath = property(getLinkPath)
-
-    def getValueString(self) -> str:  # noqa: N802
-        return str(self.value)
-
-    def __getitem__(self, i):
-        return self.value[i]
-
-    def __len__(self):
-        return len(self.value)
-
-    def __repr__(self):
-        return f"Data({self.getLinkPath()}={self.value!r})"
-
-
-class Object:
-    """A recorded component: its SOFA type, name and data (keyword arguments as given)."""
-
-    def __init__(self, type_: str, parent: "Node | None" = None, **data):
-        self.__dict__["type"] = type_
-        self.__dict__["parent"] = parent
-        self.__dict__["data"] = dict(data)
-        self.__dict__["fields"] = {}
-
-    @property
-    def name(self) -> str:
-        return str(self.data.get("name", self.type))
-
-    def path(self) -> str:
-        return f"{self.parent.path()}/{self.name}" if self.parent is not None else self.name
-
-    def getData(self, name):  # noqa: N802
-        return self.findData(name)
-
-    def findData(self, name):  # noqa: N802
-        if name not in self.fields:
-            self.fields[name] = Data(self, name)
-        return self.fields[name]
-
-    def getLinkPath(self) -> str:  # noqa: N802
-        return f"@{self.path()}"
-
-    def __getattr__(self, name):
-        if name.startswith("__"):
-            raise AttributeError(name)
-        return self.findData(name)
-
-    def __setattr__(self, name, value):
-        self.data[name] = value.value if isinstance(value, Data) else value
-
-    def init(self):
-        pass
-
-    def reinit(self):
-        pass
-
-    def __repr__(self):
-        return f"<{self.type} {self.path()}>"
-
-
-class Node:
-    """A recorded node: children, objects, and node data (``gravity``, ``dt``)."""
-
-    def __init__(self, name: str = "root", parent: "Node | None" = None):
-        self.__dict__.update(name=name, parent=parent, children=[], objects=[], data={})
-
-    def path(self) -> str:
-        return "" if self.parent is None else f"{self.parent.path()}/{self.name}"
-
-    def addChild(self, child, **data):  # noqa: N802
-        if isinstance(child, Node):
-            child.__dict__["parent"] = self
-            node = child
-        else:
-            node = Node(str(child), self)
-        node.data.update(data)
-        self.children.append(node)
-        return node
-
-    def addObject(self, type_, **data):  # noqa: N802
-        if isinstance(type_, Controller):
-            type_.__dict__["parent"] = self
-            self.objects.append(type_)
-            return type_
-        obj = Object(str(type_), self, **data)
-        self.objects.append(obj)
-        return obj
-
-    def addData(self, name, value=None, *args, **kwargs):  # noqa: N802
-        self.data[name] = kwargs.get("value", value)
-
-    def getChild(self, name):  # noqa: N802
-        return next((c for c in self.children if c.name == name), None)
-
-    def getObject(self, name):  # noqa: N802
-        return next((o for o in self.objects if o.name == name), None)
-
-    def getRoot(self):  # noqa: N802
-        return self if self.parent is None else self.parent.getRoot()
-
-    def getContext(self):  # noqa: N802
-        return self
-
-    def findData(self, name):  # noqa: N802
-        return Data(self, name)
-
-    getData = findData
-
-    def getLinkPath(self) -> str:  # noqa: N802
-        return f"@{self.path()}"
-
-    def init(self):
-        pass
-
-    def __getattr__(self, name):
-        if name.startswith("__"):
-            raise AttributeError(name)
-        for c in self.children:
-            if c.name == name:
-                return c
-        for o in self.objects:
-            if o.name == name:
-                return o
-        if name in self.data:
-            return Data(self, name)
-        raise AttributeError(f"node '{self.path() or '/'}' has no child, object or data named '{name}'")
-
-    def __setattr__(self, name, value):
-        if isinstance(value, (Node, Object, Controller)) or callable(value):
-            self.__dict__[name] = value  # a prefab keeping its parts (self.loader = self.addObject(...))
-        else:
-            self.data[name] = value.value if isinstance(value, Data) else value
-
-    def walk(self):
-        """This node and all below it, depth first."""
-        yield self
-        for c in self.children:
-            yield from c.walk()
-
-    def __repr__(self):
-        return f"<Node {self.path() or '/'}>"
-
-
-class Controller:
-    """``Sofa.Core.Controller``: recorded as an object of type ``Controller`` (its class name kept)."""
-
-    def __init__(self, *args, **kwargs):
-        self.__dict__.setdefault("parent", None)
-        self.__dict__["data"] = dict(kwargs)
-        self.__dict__["type"] = "Controller"
-        self.__dict__["fields"] = {}
-
-    @property
-    def name(self) -> str:
-        return str(self.data.get("name", type(self).__name__))
-
-    def path(self) -> str:
-        return f"{self.parent.path()}/{self.name}" if self.parent is not None else self.name
-
-
-class _Vec3(list):
-    """splib3.numerics.Vec3: the operations SoftRobots' scenes use."""
-
-    def __init__(self, *args):
-        super().__init__([float(x) for x in (args[0] if len(args) == 1 else args)] if args else [0.0, 0.0, 0.0])
-
-    def normalize(self):
-        n = math.sqrt(sum(x * x for x in self))
-        self[:] = [x / n for x in self]
-
-    def getNorm(self):  # noqa: N802
-        return math.sqrt(sum(x * x for x in self))
-
-    def toList(self):  # noqa: N802
-        return list(self)
-
-    def rotateFromQuat(self, q):  # noqa: N802
-        x, y, z, w = q
-        v = np.array(self)
-        u = np.array([x, y, z])
-        out = 2 * np.dot(u, v) * u + (w * w - np.dot(u, u)) * v + 2 * w * np.cross(u, v)
-        self[:] = out.tolist()
-        return self
-
-    def translate(self, v):
-        self[:] = [a + b for a, b in zip(self, v)]
-        return self
-
-    def scale(self, s):
-        self[:] = [a * s for a in self]
-        return self
-
-
-class _Quat(list):
-    """splib3.numerics.Quat as [x, y, z, w]."""
-
-    def __init__(self, *args):
-        super().__init__([float(x) for x in (args[0] if len(args) == 1 else args)] if args else [0, 0, 0, 1.0])
-
-    @staticmethod
-    def createFromAxisAngle(axis, angle):  # noqa: N802
-        a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
-        s = math.sin(angle / 2)
-        return _Quat(a[0] * s, a[1] * s, a[2] * s, math.cos(angle / 2))
-
-    @staticmethod
-    def createFromEuler(v, *args, **kwargs):  # noqa: N802
-        from scipy.spatial.transform import Rotation
-
-        return _Quat(*Rotation.from_euler("xyz", v).as_quat())
-
-
-def _module(name: str, **attrs) -> types.ModuleType:
-    m = types.ModuleType(name)
-    m.__dict__.update(attrs)
-    return m
-
-
-def _stand_in_modules() -> dict[str, types.ModuleType]:
-    noop = lambda *a, **k: None  # noqa: E731
-    key = types.SimpleNamespace(plus="+", minus="-", **{c: c for c in "abcdefghijklmnopqrstuvwxyz"},
-                                uparrow=19, downarrow=21, leftarrow=18, rightarrow=20, space=" ")
-    core = _module("Sofa.Core", Node=Node, Controller=Controller, Object=Object, Data=Data,
-                   DataEngine=Controller, ForceField=Controller, Base=Object)
-    simulation = _module("Sofa.Simulation", init=noop, initRoot=noop, animate=noop, reset=noop, load=noop,
-                         unload=noop)
-    helper = _module("Sofa.Helper", msg_info=noop, msg_warning=noop, msg_error=noop, msg_deprecated=noop,
-                     System=types.SimpleNamespace(addDataPath=noop, DataRepository=types.SimpleNamespace(
-                         addFirstPath=noop, addLastPath=noop)))
-    constants = _module("Sofa.constants", Key=key)
-    sofa = _module("Sofa", Core=core, Simulation=simulation, Helper=helper, constants=constants,
-                   msg_info=noop, msg_warning=noop, msg_error=noop, msg_deprecated=noop)
-    runtime = _module("SofaRuntime", importPlugin=noop, PluginRepository=types.SimpleNamespace(addFirstPath=noop))
-    numerics = _module("splib3.numerics", Vec3=_Vec3, Quat=_Quat, vec3=_module("splib3.numerics.vec3", Vec3=_Vec3),
-                       quat=_module("splib3.numerics.quat", Quat=_Quat), sin=math.sin, cos=math.cos, to_radians=math.radians,
-                       RigidDof=object)
-    animation = _module("splib3.animation", animate=noop, AnimationManager=noop,
-                        AnimationManagerController=Controller)
-    splib3 = _module("splib3", numerics=numerics, animation=animation)
-    return {"Sofa": sofa, "Sofa.Core": core, "Sofa.Simulation": simulation, "Sofa.Helper": helper,
-            "Sofa.constants": constants, "SofaRuntime": runtime, "splib3": splib3, "splib3.numerics": numerics,
-            "splib3.animation": animation}
 
 
 @contextlib.contextmanager
@@ -322,9 +54,7 @@ def record(path: str | Path) -> Node:
         raise SceneError(f"{path}: scene file not found")
     if path.suffix.lower() == ".scn":
         return _parse_xml(path)
-    modules = _stand_in_modules()
-    from .prefabs import stand_in_modules as prefab_modules
-
+    modules = stand_in_modules()
     modules.update(prefab_modules(modules))
     spec = importlib.util.spec_from_loader(f"_casadi_ws_scene_{abs(hash(str(path)))}", loader=None)
     module = importlib.util.module_from_spec(spec)

@@ -31,7 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .recorder import Data, Node, Object, SceneError, record
+from .api import Data, Node, Object, SceneError
+from .recorder import record
 
 __all__ = ["UNIT_SYSTEMS", "Translation", "import_scene", "translate"]
 
