@@ -91,6 +91,8 @@ class Problem:
     pairs (SOFA's PartialFixedConstraint: symmetry planes, rollers)."""
     admissibility: AdmissibilitySettings = field(default_factory=AdmissibilitySettings)
     """Which admissibility checks run on every reported equilibrium, and their tolerances."""
+    obstacles: list = field(default_factory=list)
+    """Rigid, fixed obstacles (:class:`casadi_ws.fem.contact.Obstacle`) the body may not enter."""
 
     def fixed_dofs(self) -> np.ndarray:
         """Mask (n_nodes, 3) of the displacement components held at zero."""
@@ -141,7 +143,7 @@ def nodes_on_plane(mesh: Mesh, point, normal, tolerance: float = 1e-9) -> np.nda
 # ---------------------------------------------------------------------------------------------------------
 
 _TOP_KEYS = {"name", "description", "mesh", "material", "material_regions", "gravity", "fixed", "cables",
-             "cavities", "end_effector", "loads", "solver", "workspace", "task", "admissibility"}
+             "cavities", "end_effector", "loads", "solver", "workspace", "task", "admissibility", "obstacles"}
 _MESH_GEN = {"generate", "length", "radius_base", "radius_tip", "resolution", "size", "divisions", "origin",
              "order"}
 _MESH_FILE = {"file", "scale", "units", "order", "transform"}
@@ -626,6 +628,86 @@ def _read_admissibility(r: _Reader, value) -> AdmissibilitySettings:
         r.flag(a, "keep_inadmissible", "admissibility", False))
 
 
+_SHAPES = {"plane": {"point", "normal"}, "box": None, "sphere": {"center", "radius"},
+           "cylinder": {"a", "b", "radius"}, "surface": {"file", "units", "scale"}}
+
+
+def _read_obstacles(r: _Reader, lst, mesh: Mesh, base: Path) -> list:
+    """``obstacles``: each ``{name, <shape>: ...}`` with one shape of ``_SHAPES``; none may hold a node of the
+    body at rest."""
+    from ..fem.contact import Obstacle, boundary_nodes
+    from ..fem.mesh import read_meshio
+    from ..fem.surface import edge_report
+
+    if lst is None:
+        return []
+    if not isinstance(lst, list):
+        r.fail("obstacles", "expected a list of obstacles, each {name, plane|box|sphere|cylinder|surface}")
+    out = []
+    x = mesh.nodes[boundary_nodes(mesh)]
+    tol = 1e-9 * mesh.characteristic_length()
+    for i, o in enumerate(lst):
+        key = f"obstacles[{i}]"
+        r.mapping(o, key, {"name"} | set(_SHAPES))
+        shapes = [k for k in o if k in _SHAPES]
+        if len(shapes) != 1:
+            r.fail(key, f"expected exactly one shape of {', '.join(_SHAPES)}, got {shapes or 'none'}")
+        kind, name = shapes[0], str(o.get("name", f"obstacle{i + 1}"))
+        k2 = f"{key}.{kind}"
+        d = o[kind]
+        if kind == "box":
+            lo, hi = _read_box(r, d, k2)
+            if np.any(lo >= hi):
+                r.fail(k2, f"the box is flat: lower {lo.tolist()}, upper {hi.tolist()}")
+            params = {"lower": lo, "upper": hi}
+        elif kind == "surface":
+            r.mapping(d, k2, _SHAPES[kind])
+            path = base / str(d.get("file"))
+            scale = UNITS[d["units"]] if d.get("units") in UNITS else r.number(d, "scale", k2, 1.0, lo=0.0, lo_open=True)
+            try:
+                m = read_meshio(path)
+            except MeshError as exc:
+                r.fail(f"{k2}.file", str(exc))
+            tris = np.concatenate([c.data for c in m.cells if c.type == "triangle"] + [np.zeros((0, 3), int)])
+            open_edges, same = edge_report(tris) if len(tris) else (1, 0)
+            if open_edges or same:
+                r.fail(f"{k2}.file", f"{path}: not a closed, consistently oriented triangle surface ({open_edges} open, "
+                                     f"{same} misoriented edge(s))")
+            params = {"vertices": np.asarray(m.points, float)[:, :3] * scale, "triangles": tris.astype(np.int64)}
+        else:
+            r.mapping(d, k2, _SHAPES[kind])
+            if kind == "plane":
+                n = r.vector(d.get("normal"), f"{k2}.normal")
+                if not np.linalg.norm(n) > 0:
+                    r.fail(f"{k2}.normal", "must not be the zero vector")
+                params = {"point": r.vector(d.get("point"), f"{k2}.point"), "normal": n / np.linalg.norm(n)}
+            elif kind == "sphere":
+                params = {"center": r.vector(d.get("center"), f"{k2}.center"),
+                          "radius": r.number(d, "radius", k2, lo=0.0, lo_open=True)}
+            else:
+                a, b = r.vector(d.get("a"), f"{k2}.a"), r.vector(d.get("b"), f"{k2}.b")
+                if not np.linalg.norm(b - a) > 0:
+                    r.fail(k2, "its end points a and b coincide")
+                params = {"a": a, "b": b, "radius": r.number(d, "radius", k2, lo=0.0, lo_open=True)}
+        ob = Obstacle(kind, name, params)
+        dist = ob.distance(x)
+        if kind == "surface" and np.mean(dist) < 0 and np.all(dist < 0):  # normals inwards: turn the sign
+            ob.params["triangles"] = ob.params["triangles"][:, ::-1].copy()
+            dist = -dist
+        if dist.min() < -tol:
+            j = int(np.argmin(dist))
+            r.fail(key, f"obstacle {name!r} holds part of the body at rest (a boundary node at "
+                        f"{np.round(x[j], 6).tolist()} lies {-dist[j]:.3g} m inside it)")
+        centre = {"box": lambda: 0.5 * (params["lower"] + params["upper"]), "sphere": lambda: params["center"],
+                  "cylinder": lambda: 0.5 * (params["a"] + params["b"]),
+                  "surface": lambda: params["vertices"].mean(axis=0)}.get(kind)
+        if centre is not None and embed(mesh, centre()[None]).outside[0] == 0.0:  # wholly inside the body
+            r.fail(key, f"obstacle {name!r} lies inside the body at rest (its centre "
+                        f"{np.round(centre(), 6).tolist()} is in the mesh)")
+        out.append(ob)
+    return out
+
+
 def _read_task(r: _Reader, value, base: Path):
     """``task``: a box or a CSV of points (:class:`casadi_ws.workspace.measures.Task`), or None."""
     if value is None:
@@ -723,9 +805,10 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
         workspace["workers"] = r.number(w, "workers", "workspace", lo=1, integer=True)
     task = _read_task(r, d.get("task"), base)
     admissibility = _read_admissibility(r, d.get("admissibility"))
+    obstacles = _read_obstacles(r, d.get("obstacles"), mesh, base)
     name = str(d.get("name", Path(source).stem))
     return Problem(mesh, material, fixed, cables + cavities, end_effector, gravity, loads, solver, workspace, name,
-                   source, regions, task, partial_fixed, admissibility)
+                   source, regions, task, partial_fixed, admissibility, obstacles)
 
 
 def read_yaml(path: str | Path, what: str = "problem file", error=None):

@@ -38,7 +38,8 @@ def fingerprint(method: str, model, settings: dict) -> str:
         h.update(np.ascontiguousarray(a).tobytes())
     pb = model.problem
     h.update(json.dumps([asdict(pb.material), asdict(pb.solver), [a.describe() for a in model.actuators],
-                         asdict(pb.admissibility)], default=float).encode())
+                         asdict(pb.admissibility), [o.describe() for o in getattr(pb, "obstacles", [])]],
+                        default=float).encode())
     h.update(json.dumps(settings, sort_keys=True, default=str).encode())
     return h.hexdigest()[:20]
 

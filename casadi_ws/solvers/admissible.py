@@ -18,6 +18,8 @@ self_penetration    a boundary sample of the deformed body (a boundary node, mid
 stroke              a cable shortened by more than its ``stroke_max``
 volume              a cavity's volume exceeds its ``volume_max``
 stretch             a principal stretch exceeds the material's ``max_stretch``
+obstacle            a boundary node lies inside one of the problem's ``obstacles`` (contact forces are not
+                    modelled yet: such a state is excluded, not pushed back)
 ==================  =============================================================================
 
 How stability is decided, cheaply: the LU that Newton already holds (SuperLU, symmetric mode, diagonal
@@ -39,7 +41,7 @@ import scipy.sparse.linalg as sla
 __all__ = ["Admissibility", "AdmissibilitySettings", "VIOLATIONS", "admissibility", "admissible_equilibrium", "decode", "encode",
            "penetrating_samples", "smallest_eigenvalues", "stable_branch"]
 
-VIOLATIONS = ("unstable", "inverted", "self_penetration", "stroke", "volume", "stretch")
+VIOLATIONS = ("unstable", "inverted", "self_penetration", "stroke", "volume", "stretch", "obstacle")
 """The names of the admissibility checks, in the order of their bits in stored masks."""
 
 
@@ -144,8 +146,24 @@ def admissibility(model, q: np.ndarray, u: np.ndarray, fac=None, K=None,
         if out.penetrating:
             names.append("self_penetration")
     names += _state_limits(model, q, F, out)
+    if _inside_obstacle(model, q):
+        names.append("obstacle")
     out.violations = tuple(n for n in VIOLATIONS if n in names)
     return out
+
+
+def _inside_obstacle(model, q) -> bool:
+    """A boundary node of the deformed body lies inside an obstacle (deeper than 1e-9 of the mesh's size)."""
+    obstacles = getattr(model.problem, "obstacles", None)
+    if not obstacles:
+        return False
+    from ..fem.contact import boundary_nodes
+
+    if "_obstacle_nodes" not in model.__dict__:
+        model._obstacle_nodes = boundary_nodes(model.mesh)
+    x = model.positions(q)[model._obstacle_nodes]
+    tol = 1e-9 * model.mesh.characteristic_length()
+    return any(float(o.distance(x).min()) < -tol for o in obstacles)
 
 
 def _det3(F: np.ndarray) -> np.ndarray:

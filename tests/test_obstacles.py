@@ -1,0 +1,87 @@
+"""Obstacles in the problem file: their shapes' signed distances against closed forms, the validation of
+their input, and the workspace that never enters them (contact forces are not modelled yet: a state
+passing into an obstacle is excluded as inadmissible)."""
+
+import meshio
+import numpy as np
+import pytest
+from conftest import small_trunk
+
+from casadi_ws import ProblemError, StaticModel, problem_from_dict, solve_equilibrium
+from casadi_ws.fem.contact import Obstacle
+from casadi_ws.solvers.admissible import admissibility
+from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
+
+
+def test_signed_distances_of_every_shape_against_closed_forms(tmp_path):
+    x = np.array([[0.0, 0.0, 2.0], [0.0, 0.0, 0.5], [3.0, 4.0, 0.0]])
+    plane = Obstacle("plane", "p", {"point": np.zeros(3), "normal": np.array([0.0, 0.0, 1.0])})
+    assert np.allclose(plane.distance(x), [2.0, 0.5, 0.0])
+    sphere = Obstacle("sphere", "s", {"center": np.zeros(3), "radius": 1.0})
+    assert np.allclose(sphere.distance(x), [1.0, -0.5, 4.0])
+    box = Obstacle("box", "b", {"lower": -np.ones(3), "upper": np.ones(3)})
+    assert np.allclose(box.distance(x), [1.0, -0.5, np.hypot(2.0, 3.0)])
+    cyl = Obstacle("cylinder", "c", {"a": np.array([0, 0, -1.0]), "b": np.array([0, 0, 1.0]), "radius": 1.0})
+    assert np.allclose(cyl.distance(x), [1.0, -0.5, 4.0])
+    # a closed surface: the same unit box as triangles; VTK's distance to it, sign inside negative
+    import pyvista as pv
+
+    cube = pv.Cube(x_length=2, y_length=2, z_length=2).triangulate()
+    tris = cube.faces.reshape(-1, 4)[:, 1:]
+    surf = Obstacle("surface", "f", {"vertices": np.asarray(cube.points), "triangles": tris})
+    assert np.allclose(surf.distance(x), [1.0, -0.5, np.hypot(2.0, 3.0)], atol=1e-9)
+
+
+BASE = {"mesh": {"generate": "box", "size": [0.01, 0.01, 0.06], "divisions": [2, 2, 6], "origin": [-0.005, -0.005, 0]},
+        "material": {"young_modulus": 1e6, "poisson_ratio": 0.3}, "fixed": {"box": [-1, -1, -1, 1, 1, 0.0001]},
+        "cables": [{"points": [[0.004, 0, 0.01], [0.004, 0, 0.06]], "pull_point": [0.004, 0, 0], "u_max": 5}]}
+
+
+def test_obstacles_are_read_and_described(tmp_path):
+    import pyvista as pv
+
+    pv.Sphere(radius=0.01, center=(0.05, 0, 0.03)).save(tmp_path / "ball.stl")
+    p = problem_from_dict({**BASE, "obstacles": [
+        {"name": "table", "plane": {"point": [0, -0.02, 0], "normal": [0, 1, 0]}},
+        {"box": [[0.02, -0.01, 0], [0.03, 0.01, 0.01]]},
+        {"sphere": {"center": [-0.03, 0, 0.03], "radius": 0.01}},
+        {"cylinder": {"a": [0, 0.03, 0], "b": [0, 0.03, 0.06], "radius": 0.005}},
+        {"name": "ball", "surface": {"file": "ball.stl"}}]}, "p.yaml", tmp_path)
+    assert [o.kind for o in p.obstacles] == ["plane", "box", "sphere", "cylinder", "surface"]
+    assert p.obstacles[0].name == "table" and p.obstacles[1].name == "obstacle2"
+    assert p.obstacles[4].distance(np.array([[0.05, 0, 0.03]]))[0] == pytest.approx(-0.01, rel=0.01)
+
+
+@pytest.mark.parametrize("obstacle, message", [
+    ({"plane": {"point": [0, 0, 0], "normal": [0, 0, 0]}}, "obstacles[0].plane.normal: must not be the zero vector"),
+    ({"sphere": {"center": [0, 0, 0.03], "radius": 0.001}}, "obstacles[0]: obstacle 'obstacle1' lies inside the body at rest"),
+    ({"sphere": {"center": [0, 0, 0.07], "radius": 0.0101}}, "obstacles[0]: obstacle 'obstacle1' holds part of the body at rest"),
+    ({"box": [[0, 0, 0], [1, 1, 0]]}, "obstacles[0].box: the box is flat"),
+    ({"cylinder": {"a": [0, 0, 0], "b": [0, 0, 0], "radius": 1}}, "obstacles[0].cylinder: its end points a and b coincide"),
+    ({"plane": {"point": [0, 0, 0], "normal": [0, 0, 1]}, "sphere": {"center": [0, 0, 0], "radius": 1}},
+     "obstacles[0]: expected exactly one shape"),
+    ({"surface": {"file": "open.stl"}}, "not a closed, consistently oriented triangle surface"),
+    ({"pillar": {}}, "obstacles[0].pillar: unknown key"),
+])
+def test_bad_obstacles_are_one_line(tmp_path, obstacle, message):
+    meshio.write(tmp_path / "open.stl", meshio.Mesh(np.eye(3), [("triangle", np.array([[0, 1, 2]]))]), binary=True)
+    with pytest.raises(ProblemError) as exc:
+        problem_from_dict({**BASE, "obstacles": [obstacle]}, "p.yaml", tmp_path)
+    assert message in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_the_workspace_never_enters_a_wall_that_cuts_it():
+    pb = small_trunk("corotational", n_cables=2)
+    model = StaticModel(pb)
+    free = forward_backward(pb, FBSettings(step=0.005, progress=False), model=model)
+    # a wall across the free workspace where cable 1 pulls the tip (+x); the body stays at x < x_wall
+    x_wall = float(np.quantile(free.points[:, 0], 0.6))
+    pb.obstacles = [Obstacle("plane", "wall", {"point": np.array([x_wall, 0, 0]),
+                                               "normal": np.array([-1.0, 0.0, 0.0])})]
+    model = StaticModel(pb)
+    fb = forward_backward(pb, FBSettings(step=0.005, progress=False), model=model)
+    assert fb.counters["excluded"]["obstacle"] > 0 and 0 < fb.n_points < free.n_points
+    for u in fb.u:  # no reported state has a boundary node beyond the wall
+        eq = solve_equilibrium(model, u)
+        assert "obstacle" not in admissibility(model, eq.q, u, eq.factorization).violations
+        assert model.positions(eq.q)[:, 0].max() <= x_wall + 1e-9
