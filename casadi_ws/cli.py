@@ -528,13 +528,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     from .fem.mesh import MeshError
+    from .fem.model import ModelError
     from .io.problem import ProblemError
     from .io.sofa.recorder import SceneError
 
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ProblemError, MeshError, UsageError, SceneError) as exc:
+    except (ProblemError, MeshError, ModelError, UsageError, SceneError) as exc:
         if args.debug:
             raise
         print(f"casadi-ws: error: {exc}", file=sys.stderr)

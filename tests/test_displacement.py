@@ -141,3 +141,22 @@ def test_problem_format_control(tmp_path):
     with pytest.raises(ProblemError, match=r"cables\[0\].control: expected force \(u is the tension\) or "
                                            r"displacement \(u is the shortening, m\), got 'position'"):
         problem_from_dict({**base, "cables": [{**cable, "control": "position"}]})
+
+
+def test_a_prescribed_cable_that_cannot_move_the_body_is_one_line(tmp_path):
+    import subprocess
+    import sys
+
+    import yaml
+
+    problem = {"mesh": {"generate": "box", "size": [0.01, 0.01, 0.06], "divisions": [2, 2, 6]},
+               "material": {"young_modulus": 1e6, "poisson_ratio": 0.3},
+               "fixed": {"box": [-1, -1, -1, 1, 1, 0.0001]}, "end_effector": "tip",
+               # its points are all fixed nodes: pulling it cannot move anything
+               "cables": [{"points": [[0.0, 0.0, 0.0], [0.01, 0.0, 0.0]], "control": "displacement", "u_max": 0.001}]}
+    path = tmp_path / "held.yaml"
+    path.write_text(yaml.safe_dump(problem))
+    r = subprocess.run([sys.executable, "-m", "casadi_ws.cli", "equilibrium", str(path), "--u", "0.0005"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert "held.yaml: cables[0].control: 'cable1' does not move the body at rest" in r.stderr

@@ -41,7 +41,11 @@ from .kernels import ElementBatch
 from .materials import element_functions
 from .mesh import embed
 
-__all__ = ["ROUNDOFF", "StaticModel"]
+__all__ = ["ModelError", "ROUNDOFF", "StaticModel"]
+
+
+class ModelError(ValueError):
+    """A problem that reads well but cannot make a model; ``str()`` is one line naming the file and key."""
 
 ROUNDOFF = 20 * np.finfo(float).eps
 """Relative round-off allowed in the assembled internal forces: at rest (zero load) a residual below
@@ -341,8 +345,11 @@ class StaticModel:
         for k, a in enumerate(self.prescribed):
             c = float(H[a] @ lu.solve(H[a]))
             if not c > 0:
-                raise ValueError(f"actuator {self.actuators[a].name!r}: its quantity does not change under its "
-                                 f"intensity at rest (compliance {c:g}), so it cannot be prescribed")
+                act = self.actuators[a]
+                j = [x for x in self.actuators if x.kind == act.kind].index(act)
+                raise ModelError(f"{self.problem.source}: {act.kind}s[{j}].control: {act.name!r} does not move the "
+                                 f"body at rest (its points are held: compliance {c:g}), so its {act.quantity_name} "
+                                 f"cannot be prescribed")
             self.kappa[k] = 1.0 / c
             self.eps[k] = 1e-8 * self.kappa[k] * abs(self.rest_quantities[a])
 
