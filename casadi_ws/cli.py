@@ -59,10 +59,10 @@ def cmd_equilibrium(args) -> int:
                   ("tension" if a.kind == "cable" else "pressure"): float(ti),
                   ("tension" if a.kind == "cable" else "pressure") + "_unit": a.intensity_unit}
                  for a, v, st, ti in zip(problem.actuators, u, states, t)]
-    units = {"tip": "m", "u": _u_unit(problem)}
+    units = {"tip": "m", "u": _u_unit(problem), "force": "N"}
     checks = adm.to_dict() if adm is not None else {"admissible": False, "stable": None, "violations": []}
     out = {"problem": problem.name, **eq.to_dict(), **checks, "stable_branch": branched, "actuators": actuators,
-           "units": units}
+           "contacts": model.contacts(eq.q), "units": units}
     print(json.dumps(out, indent=None if args.compact else 2))
     return 0 if eq.converged and checks["admissible"] else 1
 

@@ -329,9 +329,10 @@ def _check_size(r: _Reader, key: str, n_tets: float) -> None:
         r.fail(key, f"would generate {n_tets:.3g} tetrahedra, more than {MAX_GENERATED_TETS:.0e}")
 
 
-def _read_fixed(r: _Reader, d, mesh: Mesh):
+def _read_fixed(r: _Reader, d, mesh: Mesh, obstacles=()):
     """``fixed``: one selection or a list of them; each a box or a plane, optionally with ``components``.
-    Returns (fully fixed nodes, [(nodes, components)])."""
+    Returns (fully fixed nodes, [(nodes, components)]). An obstacle the body touches at rest supports it
+    along its normal (a block resting on a table): its touching nodes count in the rigid-motion test."""
     if isinstance(d, list):
         if not d:
             r.fail("fixed", "expected a selection or a non-empty list of selections")
@@ -351,8 +352,18 @@ def _read_fixed(r: _Reader, d, mesh: Mesh):
             for a in range(3):
                 modes[:, 3 + a] = np.cross(np.eye(3)[a], x)[:, c]
             rows.append(modes)
-    M = np.vstack(rows) if rows else np.zeros((0, 6))
     scale = mesh.characteristic_length()
+    for ob in obstacles:
+        from ..fem.contact import boundary_nodes
+
+        nodes = boundary_nodes(mesh)
+        dist, nrm, _ = ob.gap(mesh.nodes[nodes])
+        touch = dist <= 1e-6 * scale
+        x = mesh.nodes[nodes[touch]] - mesh.nodes.mean(0)
+        modes = np.column_stack([nrm[touch]] + [np.einsum("ij,ij->i", np.cross(np.eye(3)[a], x), nrm[touch])
+                                                for a in range(3)])
+        rows.append(modes)
+    M = np.vstack(rows) if rows else np.zeros((0, 6))
     M[:, 3:] /= scale
     if M.shape[0] < 6 or np.linalg.svd(M, compute_uv=False)[5] <= 1e-6 * np.sqrt(max(len(M), 1)):
         r.fail("fixed", f"the supports ({full.size} fully fixed node(s), {len(partial)} partial selection(s)) do "
@@ -764,7 +775,8 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
                         density, _max_stretch(r, m, "material", None))
     regions = _read_regions(r, d.get("material_regions"), mesh, material)
     gravity = r.vector(d["gravity"], "gravity") if d.get("gravity") is not None else np.zeros(3)
-    fixed, partial_fixed = _read_fixed(r, d["fixed"], mesh)
+    obstacles = _read_obstacles(r, d.get("obstacles"), mesh, base)
+    fixed, partial_fixed = _read_fixed(r, d["fixed"], mesh, obstacles)
     cables = _read_cables(r, d["cables"], mesh) if "cables" in d else []
     cavities = _read_cavities(r, d["cavities"], mesh, base) if "cavities" in d else []
 
@@ -805,7 +817,6 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
         workspace["workers"] = r.number(w, "workers", "workspace", lo=1, integer=True)
     task = _read_task(r, d.get("task"), base)
     admissibility = _read_admissibility(r, d.get("admissibility"))
-    obstacles = _read_obstacles(r, d.get("obstacles"), mesh, base)
     name = str(d.get("name", Path(source).stem))
     return Problem(mesh, material, fixed, cables + cavities, end_effector, gravity, loads, solver, workspace, name,
                    source, regions, task, partial_fixed, admissibility, obstacles)

@@ -195,8 +195,8 @@ def _stability(model, q, u, fac, K):
     """(stable, negative pivots, smallest eigenvalue or None, its mode or None); see the module."""
     from .equilibrium import Factorization, factorize, tangent_factorization
 
-    if getattr(model, "n_lam", 0):
-        # prescribed quantities border K (a saddle point, whose pivots say nothing): judge the stiffness
+    if getattr(model, "n_lam", 0) or getattr(model, "n_con", 0):
+        # prescribed quantities and contacts border K (a saddle point, whose pivots say nothing): judge the stiffness
         # with them held instead (:meth:`StaticModel.stability_matrix`)
         K = model.stability_matrix(q, u)
         fac = Factorization(factorize(K), q.copy())

@@ -1,0 +1,132 @@
+"""Frictionless contact with rigid obstacles, checked against closed forms: a block resting on a table
+(reaction = weight), a propped cantilever (beam theory, with and without a gap), the tangent and Hessian
+against finite differences, and an obstacle nobody touches changing nothing."""
+
+import numpy as np
+import pytest
+
+from casadi_ws import StaticModel, problem_from_dict, solve_equilibrium
+
+L, B, T, E, RHO = 0.2, 0.01, 0.01, 1e6, 1000.0
+"""A slender beam (m, Pa, kg/m^3): L/T = 20, so shear adds ~0.5 % to beam theory's deflections."""
+
+
+def _block(**extra):
+    """A 2 x 2 x 1 cm block standing on the table z = 0, held only by two symmetry planes (x, y)."""
+    d = {"mesh": {"generate": "box", "size": [0.02, 0.02, 0.01], "divisions": [4, 4, 2], "origin": [-0.01, -0.01, 0.0]},
+         "material": {"young_modulus": 1e5, "poisson_ratio": 0.3, "density": 1000.0},
+         "fixed": [{"box": [-1e-6, -1, -1, 1e-6, 1, 1], "components": ["x"]},
+                   {"box": [-1, -1e-6, -1, 1, 1e-6, 1], "components": ["y"]}],
+         "gravity": [0, 0, -9.81],
+         "cables": [{"points": [[0.004, 0, 0.002], [0.004, 0, 0.008]], "pull_point": [0.004, 0, 0.01], "u_max": 0.01}],
+         "obstacles": [{"name": "table", "plane": {"point": [0, 0, 0], "normal": [0, 0, 1]}}]}
+    return problem_from_dict({**d, **extra}, "block.yaml", ".")
+
+
+def test_a_block_on_a_table_weighs_on_it():
+    m = StaticModel(_block())
+    eq = solve_equilibrium(m, np.zeros(1))
+    assert eq.converged
+    weight = m.F[: m.n_mech].reshape(-1, 3).sum(axis=0)
+    reaction = m.contact_forces(eq.q)[: m.n_mech].reshape(-1, 3).sum(axis=0)
+    assert np.linalg.norm(reaction + weight) <= 1e-8 * np.linalg.norm(weight)
+    (c,) = m.contacts(eq.q)
+    assert c["name"] == "table" and np.allclose(c["force"], reaction, rtol=1e-12, atol=1e-15)
+    assert c["points"] == 25  # the bottom face's 5 x 5 nodes
+    g = m.contact.gaps(m.positions(eq.q))[0]
+    assert g.min() > -1e-9 * 0.01
+
+
+def _beam(order, gravity, obstacle=True, gap=0.0, radius=0.005, divisions=(20, 2, 2), plane=False):
+    """A cantilever clamped at x = 0 under its weight, its tip resting on a cylinder across it (a rounded,
+    frictionless support) whose top is ``gap`` below the tip's lower edge."""
+    d = {"mesh": {"generate": "box", "size": [L, B, T], "divisions": list(divisions), "origin": [0, -B / 2, -T / 2],
+                  "order": order},
+         "material": {"young_modulus": E, "poisson_ratio": 0.0, "density": RHO, "model": "linear"},
+         "fixed": {"box": [-1e-6, -1, -1, 1e-6, 1, 1]}, "gravity": [0, 0, -gravity],
+         "cables": [{"points": [[0.1, 0, 0.002], [0.15, 0, 0.002]], "pull_point": [0, 0, 0.002], "u_max": 0.01}],
+         "end_effector": [L, 0, 0]}
+    if plane:  # tilted so that only the tip's edge reaches it
+        d["obstacles"] = [{"name": "ramp", "plane": {"point": [L, -B / 2, -T / 2 - gap], "normal": [-0.3, 0.1, 1]}}]
+    elif obstacle:
+        z = -T / 2 - gap - radius
+        d["obstacles"] = [{"name": "prop", "cylinder": {"a": [L, -0.02, z], "b": [L, 0.02, z], "radius": radius}}]
+    return StaticModel(problem_from_dict(d, "beam.yaml", "."))
+
+
+EI = E * B * T**3 / 12
+
+
+def _sag(m, q, x):
+    """Vertical displacement of the beam's axis at x."""
+    return float((m.embedding(np.array([[x, 0.0, 0.0]])) @ q)[2])
+
+
+def test_a_propped_cantilever_matches_beam_theory_on_10_node_tets():
+    g = 0.01  # small deflections (~1e-4 of the length): the linear theory's setting
+    w = RHO * g * B * T
+    m = _beam(2, g)
+    eq = solve_equilibrium(m, np.zeros(1))
+    assert eq.converged
+    (c,) = m.contacts(eq.q)
+    assert c["force"][2] == pytest.approx(3 * w * L / 8, rel=0.02)  # the prop's reaction
+    assert abs(c["force"][0]) < 1e-3 * c["force"][2]
+    assert _sag(m, eq.q, L / 2) == pytest.approx(-w * L**4 / (192 * EI), rel=0.02)  # midspan deflection
+    # without the prop the tip falls as a cantilever's: wL^4 / 8EI
+    free = _beam(2, g, obstacle=False)
+    eq0 = solve_equilibrium(free, np.zeros(1))
+    assert _sag(free, eq0.q, L) == pytest.approx(-w * L**4 / (8 * EI), rel=0.02)
+
+
+def test_a_prop_below_a_gap_is_met_at_the_load_beam_theory_says():
+    gap = 1e-4
+    g_touch = gap * 8 * EI / (RHO * B * T * L**4)  # the gravity at which the free tip falls by the gap
+    before = _beam(2, 0.8 * g_touch, gap=gap)
+    eq = solve_equilibrium(before, np.zeros(1))
+    assert eq.converged and before.contacts(eq.q)[0]["points"] == 0
+    weight = RHO * 0.8 * g_touch * B * T * L
+    # what remains is the smoothing's lambda g = eps^2 / 2 at a 1e-5 m gap
+    assert np.linalg.norm(before.contacts(eq.q)[0]["force"]) < 1e-6 * weight
+    after = _beam(2, 2 * g_touch, gap=gap)
+    eq = solve_equilibrium(after, np.zeros(1))
+    w = RHO * 2 * g_touch * B * T
+    # the prop takes what the tip's deflection beyond the gap needs: 3wL/8 - 3 EI gap / L^3
+    assert after.contacts(eq.q)[0]["force"][2] == pytest.approx(3 * w * L / 8 - 3 * EI * gap / L**3, rel=0.02)
+
+
+def test_an_obstacle_nobody_touches_changes_nothing():
+    free = _beam(1, 1.0, obstacle=False)
+    far = _beam(1, 1.0, gap=0.05)  # 5 cm below a tip that sags ~2.4 cm
+    a, b = solve_equilibrium(free, np.zeros(1), target=1e-13), solve_equilibrium(far, np.zeros(1), target=1e-13)
+    assert a.converged and b.converged
+    assert np.abs(b.q[: far.n_mech] - a.q).max() < 1e-11 * np.abs(a.q).max()
+    assert far.contacts(b.q)[0]["points"] == 0
+
+
+@pytest.mark.parametrize("plane", [False, True])
+def test_contact_tangent_and_hessian_match_finite_differences(plane):
+    """On the cylinder (curved) the tangent; on a plane also the Hessian, which leaves out the distance's
+    third derivatives (zero on a flat obstacle; docs/methods.md)."""
+    rng = np.random.default_rng(3)
+    m = _beam(2, 3.0, divisions=(8, 1, 1), radius=0.01, plane=plane)
+    u = np.zeros(1)
+    eq = solve_equilibrium(m, u)
+    assert eq.converged and m.contacts(eq.q)[0]["points"] > 0
+    q = eq.q + m.full(1e-7 * rng.standard_normal(m.n_free))
+    _, K, _ = m.residual_and_tangent(q, u)
+    d = 1e-9 * rng.standard_normal(m.n_free)
+    qp, qm = q.copy(), q.copy()
+    qp[m.free] += d
+    qm[m.free] -= d
+    fd = (m.residual(qp, u) - m.residual(qm, u)) / 2
+    assert np.linalg.norm(K @ d - fd) < 1e-6 * np.linalg.norm(fd)
+    if not plane:
+        return
+    lam = rng.standard_normal(m.n_free)
+    Hqq, _ = m.residual_hessian(q, u, lam)
+
+    def vjp(qq):
+        return m.residual_and_tangent(qq, u)[1].T @ lam
+
+    fd = (vjp(qp) - vjp(qm)) / 2
+    assert np.linalg.norm(Hqq @ d - fd) < 1e-5 * np.linalg.norm(fd)
