@@ -1,16 +1,12 @@
 """Obstacles in the problem file: their shapes' signed distances against closed forms, the validation of
-their input, and the workspace that never enters them (a state
-pressing on an obstacle is in frictionless contact with it: tests/test_contact.py)."""
+their input. Contact with them: tests/test_contact.py."""
 
 import meshio
 import numpy as np
 import pytest
-from conftest import small_trunk
 
-from casadi_ws import ProblemError, StaticModel, problem_from_dict, solve_equilibrium
+from casadi_ws import ProblemError, problem_from_dict
 from casadi_ws.fem.contact import Obstacle
-from casadi_ws.solvers.admissible import admissibility
-from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
 
 
 def test_signed_distances_of_every_shape_against_closed_forms(tmp_path):
@@ -68,32 +64,3 @@ def test_bad_obstacles_are_one_line(tmp_path, obstacle, message):
     with pytest.raises(ProblemError) as exc:
         problem_from_dict({**BASE, "obstacles": [obstacle]}, "p.yaml", tmp_path)
     assert message in str(exc.value) and "\n" not in str(exc.value)
-
-
-def test_the_workspace_presses_on_a_wall_that_cuts_it_and_never_enters_it():
-    import time
-
-    pb = small_trunk("corotational", n_cables=2)
-    model = StaticModel(pb)
-    t = time.perf_counter()
-    free = forward_backward(pb, FBSettings(step=0.005, progress=False), model=model)
-    t_free = time.perf_counter() - t
-    # a wall across the free workspace where cable 1 pulls the tip (+x); the body stays at x < x_wall
-    x_wall = float(np.quantile(free.points[:, 0], 0.6))
-    pb.obstacles = [Obstacle("plane", "wall", {"point": np.array([x_wall, 0, 0]),
-                                               "normal": np.array([-1.0, 0.0, 0.0])})]
-    model = StaticModel(pb)
-    t = time.perf_counter()
-    fb = forward_backward(pb, FBSettings(step=0.005, progress=False), model=model)
-    print(f"FB free {t_free:.1f} s, {free.n_points} points; with the wall {time.perf_counter() - t:.1f} s, "
-          f"{fb.n_points} points")
-    assert fb.counters["excluded"]["obstacle"] == 0 and 0 < fb.n_points
-    assert fb.points[:, 0].max() <= x_wall + 1e-9
-    pressing = 0
-    for u in fb.u[::3]:  # every reported state is an equilibrium that stays on its side of the wall
-        eq = solve_equilibrium(model, u)
-        assert eq.converged
-        assert "obstacle" not in admissibility(model, eq.q, u, eq.factorization).violations
-        assert model.positions(eq.q)[:, 0].max() <= x_wall + 1e-9
-        pressing += model.contacts(eq.q)[0]["points"] > 0
-    assert pressing > 0

@@ -218,6 +218,9 @@ class Exploration:
         t = time.perf_counter()
         eta = self.eta(cfg)
         todo = []
+        # with obstacles the linearisation cannot tell which cells are out of reach: it holds the contacts
+        # that releasing an input would open, and misses the ones a step would close (the tip then slides)
+        prefilter = None if self.model.n_con else self.settings.prefilter
         for cell, target in candidates:
             if self.uniform:
                 if cell in self.visited:
@@ -228,7 +231,7 @@ class Exploration:
                     continue
                 self.visited_pts.append(target)
             self.counters["explored"] += 1
-            if self.settings.prefilter is not None and self._linear_gap(cfg, target, eta) > self.settings.prefilter * eta:
+            if prefilter is not None and self._linear_gap(cfg, target, eta) > prefilter * eta:
                 self._fail(target, Status.PREFILTERED)
                 continue
             todo.append((cell, target))
