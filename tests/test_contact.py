@@ -4,7 +4,7 @@ against finite differences, and an obstacle nobody touches changing nothing."""
 
 import numpy as np
 import pytest
-from conftest import nodes_in_box, trunk_cable, trunk_mesh
+from conftest import REPO, nodes_in_box, trunk_cable, trunk_mesh
 
 from casadi_ws import StaticModel, problem_from_dict, solve_equilibrium
 from casadi_ws.fem.contact import Obstacle
@@ -162,3 +162,37 @@ def test_the_trunk_above_a_table_slides_on_it_and_fb_finds_the_forward_cells():
         assert model.positions(eq.q)[:, 1].min() >= -0.022 - 1e-9
         pressing += model.contacts(eq.q)[0]["points"] > 0
     assert pressing > 0
+
+
+def test_the_finger_closes_on_an_egg_harder_as_its_cable_shortens():
+    """problems/finger_object.yaml: SoftRobots' finger (displacement-controlled cable) under an egg (a closed
+    STL): the egg's push grows with the shortening, nothing of the finger enters it, and before the finger
+    reaches it the answer is the one without the egg."""
+    from casadi_ws import load_problem
+    from casadi_ws.fem.surface import boundary_faces
+
+    pb = load_problem(REPO / "problems" / "finger_object.yaml")
+    model = StaticModel(pb)
+    bare = load_problem(REPO / "problems" / "finger_object.yaml")
+    bare.obstacles = []
+    free = StaticModel(bare)
+    egg = pb.obstacles[0]
+    faces = boundary_faces(pb.mesh)
+    pushes, q, u0 = [], None, None
+    for s in np.linspace(0.0, 0.0175, 8):
+        u = np.array([s])
+        eq = solve_equilibrium(model, u, q0=q, u0=u0)
+        assert eq.converged
+        q, u0 = eq.q, u
+        x = model.positions(eq.q)
+        # nodes and face centroids all outside the egg (to round-off)
+        assert egg.gap(np.vstack([x, x[faces].mean(axis=1)]))[0].min() > -1e-9
+        (c,) = model.contacts(eq.q)
+        pushes.append(np.linalg.norm(c["force"]))
+        if c["points"] == 0:
+            ref = solve_equilibrium(free, u)
+            assert np.abs(eq.q[: free.n_dof] - ref.q).max() < 1e-7 * np.abs(ref.q).max()
+    pushes = np.array(pushes)
+    assert pushes[0] < 1e-9 and pushes[-1] > 0.1  # N
+    touching = pushes > 1e-6
+    assert np.all(np.diff(pushes[touching]) > 0)  # harder as it shortens

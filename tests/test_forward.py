@@ -85,10 +85,11 @@ def test_result_round_trip_and_files(tmp_path):
     assert {"method", "n_points", "n_failed", "time_s", "settings"} <= set(s)
     assert s["n_points"] == 16 and s["settings"]["n_d"] == 4
     csv = np.loadtxt(tmp_path / "points.csv", delimiter=",", skiprows=1)
-    assert csv.shape == (16, 16)
+    assert csv.shape == (16, 17)
     assert (tmp_path / "points.csv").read_text().splitlines()[0] == \
-        "x,y,z,u1,u2,stable,admissible,violations,effort,steerability,compliance,tilt,state1,state2,intensity1,intensity2"
-    np.testing.assert_array_equal(csv[:, 14:16], csv[:, 3:5])  # force control: the intensity is the input
+        "x,y,z,u1,u2,stable,admissible,violations,effort,steerability,compliance,tilt,contact,state1,state2,intensity1,intensity2"
+    np.testing.assert_array_equal(csv[:, 15:17], csv[:, 3:5])  # force control: the intensity is the input
+    assert np.all(csv[:, 12] == 0.0)  # no obstacles: no contact force
     np.testing.assert_array_equal(csv[:, 5:8], np.column_stack([np.ones(16), np.ones(16), np.zeros(16)]))
     vtu = pv.read(tmp_path / "points.vtu")
     assert vtu.n_points == 16 and "u2" in vtu.point_data

@@ -3,7 +3,7 @@ frictionless contact of the body's boundary with them.
 
 Each obstacle gives the signed distance of points to it (m; positive on the free side, negative inside),
 its gradient (the unit normal) and its Hessian (the surface's curvature), by closed forms; a triangle
-surface by VTK's implicit distance. :class:`ContactSet` holds the contact points the model checks: the
+surface by libigl's AABB tree and winding number. :class:`ContactSet` holds the contact points the model checks: the
 boundary nodes that can move and, where a face can pass through an obstacle between its nodes (any
 obstacle but a plane, or curved 10-node faces), points inside the boundary faces, each paired with every
 obstacle closer than the body's size at rest. Each pair adds an unknown (its normal force) and a
@@ -83,23 +83,58 @@ class Obstacle:
         raise ValueError(f"unknown obstacle kind {self.kind!r}")
 
     def _surface_gap(self, x):
-        if "_vtk" not in self.__dict__:
-            import pyvista as pv
-            import vtk
+        """libigl's distance (an AABB tree; the sign by the winding number): the closest point c on the
+        triangles, the normal (x - c) / |x - c| outside (the face's at the surface and inside). Curvature
+        where c lies on an edge or a vertex and x outside: (I - n n^T [- e e^T along the edge]) / d."""
+        import igl
 
-            tris = self.params["triangles"]
-            surf = pv.PolyData(self.params["vertices"], np.hstack([np.full((len(tris), 1), 3), tris]).ravel())
-            self._vtk = vtk.vtkImplicitPolyDataDistance()
-            self._vtk.SetInput(surf)
-        d = np.empty(len(x))
-        n = np.empty((len(x), 3))
-        g = [0.0, 0.0, 0.0]
-        for i, xi in enumerate(x):
-            d[i] = self._vtk.EvaluateFunction(xi)
-            self._vtk.EvaluateGradient(xi, g)
-            n[i] = g
-        n /= np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
-        return d, n, np.zeros((len(x), 3, 3))  # flat triangles: no curvature (edges and corners: stated)
+        V, F = self.params["vertices"], self.params["triangles"]
+        if "_tree" not in self.__dict__:  # built once: an AABB tree of the triangles
+            nrm = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+            self._normals = nrm / np.linalg.norm(nrm, axis=1)[:, None]
+            self._tree = igl.AABB()
+            self._tree.init(V, F)
+        lo, hi = V.min(axis=0), V.max(axis=0)
+        scale = np.linalg.norm(hi - lo)
+        # far from the surface's bounding box a point cannot touch it: the box's distance, a lower bound,
+        # serves (its contact row is then ~eps^2 / (kappa g) from zero whichever distance is used)
+        d, n, H = _box_gap(x, lo, hi)
+        near = np.flatnonzero(d < 0.1 * scale)
+        if near.size:
+            d[near], n[near], H[near] = self._near_gap(np.ascontiguousarray(x[near], dtype=float), scale)
+        return d, n, H
+
+    def _near_gap(self, x, scale):
+        import igl
+
+        V, F = self.params["vertices"], self.params["triangles"]
+        d2, face, c = self._tree.squared_distance(V, F, x)
+        v = x - c
+        r = np.linalg.norm(v, axis=1)
+        # the sign: inside where the surface winds around the point (generalised winding number > 1/2)
+        d = np.where(igl.fast_winding_number(V, F, x) > 0.5, -r, r)
+        along = r > 1e-9 * scale
+        n = self._normals[face].copy()
+        n[along] = (np.sign(d)[along, None] * v[along]) / r[along, None]
+        # where on its triangle c lies: barycentric coordinates near 0 put it on an edge or a vertex
+        tri = V[F[face]]
+        lam = _barycentric(c, tri)
+        on = lam < 1e-9
+        k = len(x)
+        H = np.zeros((k, 3, 3))
+        curved = along & (d > 0) & on.any(axis=1)
+        if curved.any():
+            i = np.flatnonzero(curved)
+            nn = n[i]
+            P = np.eye(3)[None] - nn[:, :, None] * nn[:, None, :]
+            edge = on[i].sum(axis=1) == 1  # on one edge: straight along it
+            if edge.any():
+                a = np.argmax(on[i][edge], axis=1)  # the edge opposite the zero coordinate
+                t = tri[i[edge], (a + 2) % 3] - tri[i[edge], (a + 1) % 3]
+                t /= np.linalg.norm(t, axis=1)[:, None]
+                P[edge] -= t[:, :, None] * t[:, None, :]
+            H[i] = P / d[i, None, None]
+        return d, n, H
 
     def describe(self) -> dict:
         return {"kind": self.kind, "name": self.name,
@@ -255,3 +290,15 @@ def contact_set(mesh, obstacles, moving: np.ndarray, young_modulus: float) -> Co
     W.eliminate_zeros()
     kappa = float(young_modulus * h)
     return ContactSet(list(obstacles), W, np.concatenate(owner), kappa, 1e-8 * kappa * h)
+
+
+def _barycentric(c, tri):
+    """Barycentric coordinates (k, 3) of the points c (k, 3) in the triangles tri (k, 3, 3)."""
+    a, b, cc = tri[:, 0], tri[:, 1], tri[:, 2]
+    v0, v1, v2 = b - a, cc - a, c - a
+    d00, d01, d11 = (np.einsum("ij,ij->i", p, q) for p, q in ((v0, v0), (v0, v1), (v1, v1)))
+    d20, d21 = np.einsum("ij,ij->i", v2, v0), np.einsum("ij,ij->i", v2, v1)
+    den = d00 * d11 - d01 * d01
+    l1 = (d11 * d20 - d01 * d21) / den
+    l2 = (d00 * d21 - d01 * d20) / den
+    return np.column_stack([1.0 - l1 - l2, l1, l2])

@@ -420,7 +420,7 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
     workers = max(1, min(int(workers), n // 50 or 1))
     fp = fingerprint("forward", model, {k: getattr(settings, k) for k in
                                         ("n_d", "predictor", "reuse_factorization", "krylov", "tol", "max_iter",
-                                         "store_states", "stride")} | {"workers": workers, "format": 4})
+                                         "store_states", "stride")} | {"workers": workers, "format": 5})
     run = RunState(checkpoint_dir, "forward", fp, resume, t0)
     try:
         if workers == 1:

@@ -67,8 +67,10 @@ class FBSettings:
     point to the cell's box). Over a one-cell move the linearisation errs by ~s^2 x curvature (~0.04 s on
     the trunk at s = 4 mm). Measured (docs/methods.md): on the 2-cable trunk 0.1, 0.05 and 0.02 reach the
     same cells and 0 loses 12 % of them, along the edges; on a linear-material trunk at s = 1.5 mm, 0.05
-    already loses 6 % (its cables' geometric stiffness bends the workspace more per cell). Recorded as
-    ``prefiltered``. None: off (the paper's rule)."""
+    already loses 6 % (its cables' geometric stiffness bends the workspace more per cell). Not applied from
+    a configuration whose body is within a step of an obstacle (the linearisation does not see contacts
+    close or open); a cell wholly inside an obstacle is always dropped (the tip is inside the body, which
+    never enters one). Recorded as ``prefiltered``. None: off (the paper's rule)."""
     cells_meeting_box: bool = True
     """Step 2 keeps the neighbours whose *cell* meets the Step-1 box (the box grown by half a step), not
     only those whose centre lies in it as (7) states: a cell is reached by any point in it, and along the
@@ -218,9 +220,13 @@ class Exploration:
         t = time.perf_counter()
         eta = self.eta(cfg)
         todo = []
-        # with obstacles the linearisation cannot tell which cells are out of reach: it holds the contacts
-        # that releasing an input would open, and misses the ones a step would close (the tip then slides)
-        prefilter = None if self.model.n_con else self.settings.prefilter
+        prefilter = self.settings.prefilter
+        obstacles = self.problem.obstacles if self.model.n_con else []
+        if obstacles and self.model.contact.gaps(self.model.positions(cfg.q))[0].min() < eta:
+            # near an obstacle the linearisation cannot tell which cells are out of reach: it holds the
+            # contacts that releasing an input would open, and misses those a step would close (the tip then
+            # slides along the obstacle)
+            prefilter = None
         for cell, target in candidates:
             if self.uniform:
                 if cell in self.visited:
@@ -231,6 +237,9 @@ class Exploration:
                     continue
                 self.visited_pts.append(target)
             self.counters["explored"] += 1
+            if any(o.distance(target)[0] < -0.87 * eta for o in obstacles):  # the whole cell is in an obstacle
+                self._fail(target, Status.PREFILTERED)
+                continue
             if prefilter is not None and self._linear_gap(cfg, target, eta) > prefilter * eta:
                 self._fail(target, Status.PREFILTERED)
                 continue
@@ -435,12 +444,12 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
         if settings.step is None:
             settings.step = default_step(model)
         # the budget is not part of the answer: a run stopped by it resumes with a larger one
-        # checkpoint format 5: maps with the actuators' intensities (4: reached points carry their maps,
+        # checkpoint format 6: the contact map (5: maps with the actuators' intensities; 4: reached points carry their maps,
         # failures their closest points; 2: frontiers
         # carry Q); an older checkpoint would resume without them and so end
         # with another result than an uninterrupted run
         fp = fingerprint("forward-backward", model, asdict(settings) | {"workers": None, "progress": None,
-                                                                         "max_cells": None, "format": 5})
+                                                                         "max_cells": None, "format": 6})
         run = RunState(checkpoint_dir, "forward-backward", fp, resume, t0)
 
         own = executor is None
