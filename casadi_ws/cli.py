@@ -420,6 +420,19 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def _study_parser(sub) -> None:
+    st = sub.add_parser("study", help="design study: workspaces of many designs, the best ones (grid or Optuna)")
+    st.add_argument("study", help="study YAML file (docs/studies.md)")
+    st.add_argument("--out", required=True, help="output directory")
+    st.add_argument("--workers", type=int, default=1, help="trials run at once, each in its own process (1)")
+    st.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="run the trials on an existing Dask cluster (e.g. tcp://host:8786; workers with --nthreads 1)")
+    st.add_argument("--resume", action="store_true", help="continue the study whose study.db is in --out")
+    st.add_argument("--overwrite", action="store_true", help="delete --out and start again")
+    st.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    st.set_defaults(func=cmd_study)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="casadi-ws", description="Reachable workspace of soft robots (FEM + CasADi).")
     p.add_argument("--debug", action="store_true", help="show Python tracebacks on errors")
@@ -508,16 +521,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--plot", default=None, help="write the overlaid three views to this PNG")
     c.set_defaults(func=cmd_compare)
 
-    st = sub.add_parser("study", help="design study: workspaces of many designs, the best ones (grid or Optuna)")
-    st.add_argument("study", help="study YAML file (docs/studies.md)")
-    st.add_argument("--out", required=True, help="output directory")
-    st.add_argument("--workers", type=int, default=1, help="trials run at once, each in its own process (1)")
-    st.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                    help="run the trials on an existing Dask cluster (e.g. tcp://host:8786; workers with --nthreads 1)")
-    st.add_argument("--resume", action="store_true", help="continue the study whose study.db is in --out")
-    st.add_argument("--overwrite", action="store_true", help="delete --out and start again")
-    st.add_argument("--quiet", action="store_true", help="no progress bar or summary")
-    st.set_defaults(func=cmd_study)
+    _study_parser(sub)
 
     d = sub.add_parser("demo", help="forward workspace of the built-in default problem (2-cable trunk)")
     d.add_argument("--nd", type=int, default=11, help="values per cable")

@@ -167,9 +167,15 @@ class StaticModel:
         self.p0 = self.C @ self.X
         self.C_free = self.C[:, self.free].tocsc()
 
-        # force scale under which a residual counts as zero. Loads of exactly 0 give q = 0, but the internal
-        # forces there are round-off, ~eps of the force each element exerts at unit strain (E V_e^(2/3),
-        # the polar decomposition's included); that round-off must pass the tolerance whatever the law
+        self._force_scale(w)
+        self._G_qp = G  # (m, n_qp, n_nodes, 3): deformation gradients for the admissibility checks
+
+    def _force_scale(self, w):
+        """The force scale under which a residual counts as zero. Loads of exactly 0 give q = 0, but the
+        internal forces there are round-off, ~eps of the force each element exerts at unit strain
+        (E V_e^(2/3), the polar decomposition's included); that round-off must pass the tolerance whatever
+        the law."""
+        problem, mesh, mat = self.problem, self.mesh, self.problem.material
         E_e = np.full(mesh.n_tets, mat.young_modulus)
         for tets, region in problem.regions:
             E_e[tets] = region.young_modulus
@@ -177,7 +183,6 @@ class StaticModel:
         """The norm over elements of the force each exerts at unit strain, E_e V_e^(2/3) (N)."""
         self.force_floor = max(1e-12 * mat.young_modulus * mesh.characteristic_length() ** 2,
                                ROUNDOFF * self.element_force_scale / problem.solver.tolerance)
-        self._G_qp = G  # (m, n_qp, n_nodes, 3): deformation gradients for the admissibility checks
 
     # ------------------------------------------------------------------ assembly
     def embedding(self, points: np.ndarray) -> sp.csr_matrix:
