@@ -365,6 +365,14 @@ def cmd_study(args) -> int:
     study = load_study(args.study)
     if args.workers < 1:
         raise UsageError(f"--workers: expected an integer >= 1, got {args.workers}")
+    if args.trials is not None:
+        if study.method != "optuna":
+            raise UsageError("--trials: a grid study runs every design of its grid; --trials is for method: optuna")
+        if args.trials < 1:
+            raise UsageError(f"--trials: expected an integer >= 1, got {args.trials}")
+        from dataclasses import replace as _replace
+
+        study = _replace(study, trials=args.trials)
     out = Path(args.out)
     if args.resume and args.overwrite:
         raise UsageError("--resume and --overwrite contradict each other")
@@ -430,6 +438,9 @@ def _study_parser(sub) -> None:
     st.add_argument("--resume", action="store_true", help="continue the study whose study.db is in --out")
     st.add_argument("--overwrite", action="store_true", help="delete --out and start again")
     st.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    st.add_argument("--trials", type=int, default=None,
+                    help="designs to evaluate instead of the file's trials (optuna studies; a quick look, or more "
+                         "on --resume)")
     st.set_defaults(func=cmd_study)
 
 

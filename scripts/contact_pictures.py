@@ -63,7 +63,7 @@ def trunk(out: Path) -> None:
     model = StaticModel(problem)
     res = forward(problem, 21, ForwardSettings(progress=False), model=model)
     table = problem.obstacles[0].params["point"][1]
-    touching = res.maps()["contact"] > 1e-9  # N
+    touching = res.maps()["contact"] > 0  # N, pressing on the table
     fig, ax = plt.subplots(figsize=(7, 4.2))
     p = res.points * 1e3
     ax.scatter(p[~touching, 0], p[~touching, 1], s=6, c="tab:blue", label="tip, free")

@@ -196,3 +196,20 @@ def test_the_finger_closes_on_an_egg_harder_as_its_cable_shortens():
     assert pushes[0] < 1e-9 and pushes[-1] > 0.1  # N
     touching = pushes > 1e-6
     assert np.all(np.diff(pushes[touching]) > 0)  # harder as it shortens
+
+
+def test_an_obstacles_position_is_a_design_variable():
+    """A study varies where the table stands through the key path of its point (docs/studies.md)."""
+    from casadi_ws.io.problem import read_yaml
+    from casadi_ws.study.spec import apply, study_from_dict
+
+    path = REPO / "problems" / "trunk_table.yaml"
+    study = study_from_dict({"problem": str(path), "variables": [
+        {"path": "obstacles[0].plane.point[1]", "range": [-0.03, -0.02], "n": 2}],
+        "workspace": {"method": "forward", "n_d": 3}, "objectives": [{"maximize": "volume"}], "method": "grid"},
+        REPO / "study.yaml")
+    (var,) = study.variables
+    assert var.grid() == [-0.03, -0.02]
+    data = apply(read_yaml(path), {var.path: -0.025})
+    pb = problem_from_dict(data, str(path), path.parent)
+    assert pb.obstacles[0].params["point"][1] == -0.025

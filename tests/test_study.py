@@ -263,3 +263,11 @@ def test_the_documented_study_file_is_valid(tmp_path):
     assert [v.path for v in study.variables][-1] == "material.model"
     for design in (study.designs()[0], study.designs()[-1]):  # every listed value is one the format accepts
         cw.problem_from_dict(study.problem_data(design), "design", REPO / "problems")
+
+
+def test_trials_flag_is_for_optuna_studies_and_positive(tmp_path):
+    r = cli("study", tiny_study(tmp_path), "--out", tmp_path / "out", "--trials", "2")
+    assert r.returncode == 2 and "--trials: a grid study runs every design" in r.stderr and r.stderr.count("\n") == 1
+    r = cli("study", REPO / "problems" / "study_trunk3.yaml", "--out", tmp_path / "out", "--trials", "0")
+    assert r.returncode == 2 and "--trials: expected an integer >= 1, got 0" in r.stderr
+    assert not (tmp_path / "out").exists()

@@ -85,7 +85,8 @@ class Obstacle:
     def _surface_gap(self, x):
         """libigl's distance (an AABB tree; the sign by the winding number): the closest point c on the
         triangles, the normal (x - c) / |x - c| outside (the face's at the surface and inside). Curvature
-        where c lies on an edge or a vertex and x outside: (I - n n^T [- e e^T along the edge]) / d."""
+        where c lies on an edge or a vertex and x outside: (I - n n^T [- e e^T along the edge]) / d. The
+        distance is to the triangles rounded by rho = 1e-4 of their mean edge (see the end)."""
         import igl
 
         V, F = self.params["vertices"], self.params["triangles"]
@@ -94,25 +95,27 @@ class Obstacle:
             self._normals = nrm / np.linalg.norm(nrm, axis=1)[:, None]
             self._tree = igl.AABB()
             self._tree.init(V, F)
+            self._winding = igl.FastWindingNumberBVH()
+            self._winding.init(V, F)
+            self._rho = 1e-4 * float(np.mean(np.linalg.norm(V[F[:, 1]] - V[F[:, 0]], axis=1)))
         lo, hi = V.min(axis=0), V.max(axis=0)
         scale = np.linalg.norm(hi - lo)
         # far from the surface's bounding box a point cannot touch it: the box's distance, a lower bound,
         # serves (its contact row is then ~eps^2 / (kappa g) from zero whichever distance is used)
         d, n, H = _box_gap(x, lo, hi)
+        d -= self._rho
         near = np.flatnonzero(d < 0.1 * scale)
         if near.size:
             d[near], n[near], H[near] = self._near_gap(np.ascontiguousarray(x[near], dtype=float), scale)
         return d, n, H
 
     def _near_gap(self, x, scale):
-        import igl
-
         V, F = self.params["vertices"], self.params["triangles"]
         d2, face, c = self._tree.squared_distance(V, F, x)
         v = x - c
         r = np.linalg.norm(v, axis=1)
         # the sign: inside where the surface winds around the point (generalised winding number > 1/2)
-        d = np.where(igl.fast_winding_number(V, F, x) > 0.5, -r, r)
+        d = np.where(self._winding.winding_number(x) > 0.5, -r, r)
         along = r > 1e-9 * scale
         n = self._normals[face].copy()
         n[along] = (np.sign(d)[along, None] * v[along]) / r[along, None]
@@ -134,7 +137,10 @@ class Obstacle:
                 t /= np.linalg.norm(t, axis=1)[:, None]
                 P[edge] -= t[:, :, None] * t[:, None, :]
             H[i] = P / d[i, None, None]
-        return d, n, H
+        # the contact surface is the triangles rounded by a radius rho (their points within rho): smooth,
+        # so a point resting on an edge or a vertex has one normal; on the bare triangles the normal there
+        # is any of a cone's, the contact row has no exact root and Newton stalls ~1e-7 above it
+        return d - self._rho, n, H
 
     def describe(self) -> dict:
         return {"kind": self.kind, "name": self.name,
@@ -233,6 +239,8 @@ class ContactSet:
     """Stiffness scale (N/m) of the contact rows: E h, the stiffness a boundary node of size h has."""
     eps: float
     """Smoothing of the Fischer-Burmeister rows (N): 1e-8 kappa h."""
+    h: float = 0.0
+    """The mean edge of the boundary faces (m)."""
 
     @property
     def n(self) -> int:
@@ -289,7 +297,7 @@ def contact_set(mesh, obstacles, moving: np.ndarray, young_modulus: float) -> Co
     W = sp.vstack(blocks).tocsr()
     W.eliminate_zeros()
     kappa = float(young_modulus * h)
-    return ContactSet(list(obstacles), W, np.concatenate(owner), kappa, 1e-8 * kappa * h)
+    return ContactSet(list(obstacles), W, np.concatenate(owner), kappa, 1e-8 * kappa * h, h)
 
 
 def _barycentric(c, tri):

@@ -90,9 +90,9 @@ class StaticModel:
         fixed = problem.fixed_dofs()  # (n_nodes, 3)
         self.contact = contact_set(mesh, getattr(problem, "obstacles", []), ~fixed.all(axis=1),
                                    problem.material.young_modulus)
-        """The contact points with the obstacles (:class:`casadi_ws.fem.contact.ContactSet`), or None."""
+        """The contact points with the obstacles (:class:`casadi_ws.fem.contact.ContactSet`), or None; their
+        normal forces (over kappa) follow the intensities in the state."""
         self.n_con = 0 if self.contact is None else self.contact.n
-        """Contact points: their normal forces (over kappa) follow the intensities in the state."""
         self.n_extra = self.n_lam + self.n_con
         self.n_dof = self.n_mech + self.n_extra
         self.fixed_nodes = np.flatnonzero(fixed.all(axis=1))
@@ -476,6 +476,20 @@ class StaticModel:
                         "points": int(np.count_nonzero(on & i)),
                         "penetration": float(max(0.0, -g[i].min())) if i.any() else 0.0})
         return out
+
+    def contact_step_limit(self, q: np.ndarray, dq: np.ndarray) -> float:
+        """The share of the Newton step dq (free dofs) to take so that no contact point now apart from its
+        obstacle ends deeper inside it than it is outside now, or than 1 % of an element (linearised): a full
+        step from far away ignores the obstacle and lands deep inside it, where the contact rows are far
+        from their solution. At least 1e-2."""
+        g, _, _, _, grad = self.contact_state(q)
+        pt, _, _, fpos = self._ce
+        dg = np.bincount(pt, weights=grad * dq[fpos], minlength=self.n_con)
+        depth = np.maximum(g, 0.01 * self.contact.h)
+        hit = (g > 0) & (g + dg < -depth)
+        if not hit.any():
+            return 1.0
+        return float(max(1e-2, np.min((g[hit] + depth[hit]) / -dg[hit])))
 
     def _contact_residual(self, q, R):
         """Adds -lambda dg/dq to the nodal rows of R and sets the contact rows phi(lambda, kappa g); returns

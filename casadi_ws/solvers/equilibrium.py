@@ -255,7 +255,7 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
             dq = -fac.solve(R)
         its += 1
         size = np.linalg.norm(dq)
-        alpha = 1.0
+        alpha = alpha0 = model.contact_step_limit(q, dq) if getattr(model, "n_con", 0) else 1.0
         while True:
             q_try = q.copy()
             q_try[free] += alpha * dq
@@ -268,7 +268,7 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
             if ok or not fresh:
                 break
             alpha *= 0.5
-            if alpha < 1.0 / 64:
+            if alpha < alpha0 / 64:
                 return stop(DIVERGED)
         # keep the factorisation while it contracts fast, or slowly but enough to finish in 3 cheap steps
         # (near the tolerance theta measures round-off, and a refactorisation would buy nothing)

@@ -10,8 +10,8 @@
 ``tilt``           the angle (degrees) between the robot's axis through the tip now and at rest; the axis
                    is the direction from the fixed nodes' centroid to the rest tip, carried by the tip
                    element's mean deformation gradient (``direction``: its unit vector now).
-``contact``        the magnitude of the total force (N) the obstacles exert on the body (summed over them;
-                   0 without obstacles or out of contact).
+``contact``        the magnitude of the total force (N) the obstacles exert on the body (summed over those it
+                   presses on; 0 without obstacles or out of contact).
 ``state1..n``      each actuator's quantity (a cable's length, m; a cavity's volume, m^3).
 """
 
@@ -76,7 +76,8 @@ def state_maps(model, q, u) -> dict:
     """The maps that need no LU: effort, tilt and direction, and the actuators' states."""
     d = direction(model, q)
     axis = _tip_axis(model)[2]
-    contact = sum(np.linalg.norm(c["force"]) for c in model.contacts(q)) if getattr(model, "n_con", 0) else 0.0
+    # the obstacles that points press on (the others' forces are the smoothing's ~eps^2 / (kappa g))
+    contact = sum(np.linalg.norm(c["force"]) for c in model.contacts(q) if c["points"]) if getattr(model, "n_con", 0) else 0.0
     return {"effort": float(effort(model, u)[0]), "tilt": float(np.degrees(np.arccos(np.clip(d @ axis, -1.0, 1.0)))),
             "contact": float(contact), "direction": d, "states": model.actuator_states(q), "intensities": model.intensities(q, u)}
 
