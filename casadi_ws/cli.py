@@ -268,11 +268,12 @@ def cmd_report(args) -> int:
 
     d = _result_dir(args.result)
     result = load_result(d)
-    mesh = None
+    mesh, obstacles = None, []
     src = args.problem or result.problem.get("source")
     if src and Path(src).is_file():
-        mesh = _load(src).mesh
-    out = write_report(result, args.out or d / "report.html", mesh)
+        problem = _load(src)
+        mesh, obstacles = problem.mesh, problem.obstacles
+    out = write_report(result, args.out or d / "report.html", mesh, obstacles)
     print(out)
     return 0
 

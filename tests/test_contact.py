@@ -213,3 +213,23 @@ def test_an_obstacles_position_is_a_design_variable():
     data = apply(read_yaml(path), {var.path: -0.025})
     pb = problem_from_dict(data, str(path), path.parent)
     assert pb.obstacles[0].params["point"][1] == -0.025
+
+
+def test_obstacles_are_in_the_paraview_scene_and_the_report(tmp_path):
+    import meshio
+
+    from casadi_ws.io.report import write_report
+    from casadi_ws.io.scene import write_scene
+
+    pb = _block(obstacles=[{"name": "table", "plane": {"point": [0, 0, 0], "normal": [0, 0, 1]}},
+                           {"name": "ball", "sphere": {"center": [0.03, 0, 0.005], "radius": 0.005}}])
+    assert "obstacles.vtu" in write_scene(pb, tmp_path)
+    m = meshio.read(tmp_path / "obstacles.vtu")
+    owner = m.cell_data["obstacle"][0]
+    assert set(owner) == {0, 1}
+    table = m.points[m.cells[0].data[owner == 0].ravel()]
+    assert np.allclose(table[:, 2], 0.0)  # the plane's square lies in the plane
+    res = forward(pb, 2, model=StaticModel(pb))
+    assert np.all(res.maps()["contact"] > 0)  # it stands on the table at every input
+    page = write_report(res, tmp_path / "report.html", pb.mesh, pb.obstacles).read_text()
+    assert "obstacle table" in page and "obstacle ball" in page

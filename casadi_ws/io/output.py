@@ -18,7 +18,7 @@ def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
     scene = write_scene(problem, out)
     three_views(result, out / "three_views.png", problem.mesh, title=f"{problem.name}: {result.method} workspace")
     workspace_3d(result, out / "workspace_3d.png", problem.mesh, title=f"{problem.name}: {result.method}")
-    write_report(result, out / "report.html", problem.mesh)
+    write_report(result, out / "report.html", problem.mesh, getattr(problem, "obstacles", []))
     for w in result.warnings():
         print(f"casadi-ws: warning: {w}", file=sys.stderr)
     if not quiet:

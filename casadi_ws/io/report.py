@@ -1,7 +1,8 @@
 """An interactive, self-contained HTML page of a workspace result (plotly; works offline, no server).
 
-The page shows the robot at rest (its outer surface), the workspace's boundary surface (translucent), and the
-reported points coloured by a map chosen from a menu (effort, steerability, compliance, tilt, u1..un), with
+The page shows the robot at rest (its outer surface), its obstacles, the workspace's boundary surface
+(translucent), and the reported points coloured by a map chosen from a menu (effort, steerability,
+compliance, tilt, contact with obstacles, u1..un), with
 the summary's numbers beside it. plotly.js is embedded in the file (~4.6 MB), so it opens anywhere.
 """
 
@@ -18,13 +19,24 @@ from ..workspace.result import _json_default
 
 __all__ = ["write_report"]
 
-_UNITS = {"effort": "", "steerability": "m per input unit", "compliance": "m/N", "tilt": "deg"}
+_UNITS = {"effort": "", "steerability": "m per input unit", "compliance": "m/N", "tilt": "deg", "contact": "N"}
 
 
-def _figure(result, mesh):
+def _figure(result, mesh, obstacles=()):
     import plotly.graph_objects as go
 
+    from .scene import obstacle_surface
+
     traces = []
+    if len(obstacles):
+        P = result.points if result.n_points else np.zeros((1, 3))
+        X = np.vstack([P] + ([np.asarray(mesh.nodes, float)] if mesh is not None else []))
+        lo, hi = X.min(axis=0), X.max(axis=0)
+        for ob in obstacles:
+            V, T = obstacle_surface(ob, lo - 0.25 * (hi - lo), hi + 0.25 * (hi - lo))
+            traces.append(go.Mesh3d(x=V[:, 0], y=V[:, 1], z=V[:, 2], i=T[:, 0], j=T[:, 1], k=T[:, 2],
+                                    color="sienna", opacity=0.4, name=f"obstacle {ob.name}", showlegend=True,
+                                    hoverinfo="skip"))
     if mesh is not None:
         X, T = np.asarray(mesh.nodes, float), boundary_faces(mesh)[:, :3]
         traces.append(go.Mesh3d(x=X[:, 0], y=X[:, 1], z=X[:, 2], i=T[:, 0], j=T[:, 1], k=T[:, 2],
@@ -37,8 +49,8 @@ def _figure(result, mesh):
                                 color="steelblue", opacity=0.3, name="workspace boundary", showlegend=True,
                                 flatshading=True, hoverinfo="skip"))
     maps = result.maps()
-    options = {name: maps[name] for name in ("effort", "steerability", "compliance", "tilt")
-               if np.any(np.isfinite(maps[name]))}
+    options = {name: maps[name] for name in ("effort", "steerability", "compliance", "tilt", "contact")
+               if np.any(np.isfinite(maps[name])) and (name != "contact" or len(obstacles))}
     for i in range(result.u.shape[1] if result.u.ndim == 2 else 0):
         options[f"u{i + 1}"] = result.u[:, i]
     names = list(options) or ["none"]
@@ -92,12 +104,13 @@ def _table(result) -> str:
     return f'<table id="summary">{cells}</table>'
 
 
-def write_report(result, path: str | Path, mesh=None) -> Path:
-    """Write the page for ``result`` (and the robot's ``mesh`` at rest, if given) to ``path``."""
+def write_report(result, path: str | Path, mesh=None, obstacles=()) -> Path:
+    """Write the page for ``result`` (and the robot's ``mesh`` at rest and the problem's ``obstacles``, if
+    given) to ``path``."""
     import plotly.io as pio
 
     path = Path(path)
-    fig = _figure(result, mesh)
+    fig = _figure(result, mesh, obstacles)
     plot = pio.to_html(fig, full_html=False, include_plotlyjs=True, div_id="workspace",
                        config={"displaylogo": False, "responsive": True})
     page = f"""<!DOCTYPE html>
@@ -107,7 +120,8 @@ def write_report(result, path: str | Path, mesh=None) -> Path:
 td{{font-variant-numeric:tabular-nums}}</style></head>
 <body><div id="view">{plot}</div><div id="side"><h2>Summary</h2>{_table(result)}
 <p>Colour: choose a map in the menu above the view. Maps: effort (RMS input fraction), steerability
-(smallest singular value of dp/du), compliance (largest eigenvalue of C K⁻¹ Cᵀ, m/N), tilt (deg).
+(smallest singular value of dp/du), compliance (largest eigenvalue of C K⁻¹ Cᵀ, m/N), tilt (deg), contact
+(the force the obstacles exert on the body, N; with obstacles).
 Drag to rotate, scroll to zoom.</p>
 <script type="application/json" id="summary-json">{html.escape(json.dumps(result.summary(), default=_json_default))}</script>
 </div></body></html>
