@@ -333,6 +333,8 @@ def _read_fixed(r: _Reader, d, mesh: Mesh, obstacles=()):
     """``fixed``: one selection or a list of them; each a box or a plane, optionally with ``components``.
     Returns (fully fixed nodes, [(nodes, components)]). An obstacle the body touches at rest supports it
     along its normal (a block resting on a table): its touching nodes count in the rigid-motion test."""
+    from ..fem.contact import boundary_nodes
+
     if isinstance(d, list):
         if not d:
             r.fail("fixed", "expected a selection or a non-empty list of selections")
@@ -353,10 +355,8 @@ def _read_fixed(r: _Reader, d, mesh: Mesh, obstacles=()):
                 modes[:, 3 + a] = np.cross(np.eye(3)[a], x)[:, c]
             rows.append(modes)
     scale = mesh.characteristic_length()
+    nodes = boundary_nodes(mesh) if obstacles else None
     for ob in obstacles:
-        from ..fem.contact import boundary_nodes
-
-        nodes = boundary_nodes(mesh)
         dist, nrm, _ = ob.gap(mesh.nodes[nodes])
         touch = dist <= 1e-6 * scale
         x = mesh.nodes[nodes[touch]] - mesh.nodes.mean(0)

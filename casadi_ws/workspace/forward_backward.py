@@ -237,7 +237,9 @@ class Exploration:
                     continue
                 self.visited_pts.append(target)
             self.counters["explored"] += 1
-            if any(o.distance(target)[0] < -0.87 * eta for o in obstacles):  # the whole cell is in an obstacle
+            # the whole cell is in an obstacle (gap: the contact's cached distance; distance() rebuilds a
+            # triangle surface on every call)
+            if any(o.gap(target[None])[0][0] < -0.87 * eta for o in obstacles):
                 self._fail(target, Status.PREFILTERED)
                 continue
             if prefilter is not None and self._linear_gap(cfg, target, eta) > prefilter * eta:
