@@ -24,8 +24,9 @@ tangent is bordered by the prescribed actuators' rows, dR/du_a is nonzero in its
 end-effector, the mesh operators and the loads carry zero columns for the intensities. The element laws come from
 :mod:`casadi_ws.fem.materials` (CasADi SX, one graph per element type) and are evaluated over the mesh by
 :class:`casadi_ws.fem.kernels.ElementBatch`; the actuators' quantities and their derivatives are one CasADi
-function of the actuators' embedded points (:mod:`casadi_ws.actuation`). Assembly uses index maps fixed
-once per mesh. All matrices returned here are restricted to the free dofs.
+function of the actuators' embedded points (:mod:`casadi_ws.actuation`). Terms that bring unknowns and rows of
+their own (contact) are registered objects (:mod:`casadi_ws.fem.terms`) every method iterates over. Assembly
+uses index maps fixed once per mesh. All matrices returned here are restricted to the free dofs.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ import scipy.sparse as sp
 
 from ..actuation.base import quantity_functions
 from .contact import contact_set
+from .terms import ObstacleContact, fischer_burmeister
 from .kernels import ElementBatch
 from .materials import element_functions
 from .mesh import embed
@@ -51,14 +53,6 @@ class ModelError(ValueError):
 ROUNDOFF = 20 * np.finfo(float).eps
 """Relative round-off allowed in the assembled internal forces: at rest (zero load) a residual below
 ROUNDOFF x the elements' force scale counts as zero (measured at rest: ~3 eps for every law and order)."""
-
-
-def fischer_burmeister(a, b, eps):
-    """(phi, dphi/da, dphi/db, d2phi/da2, d2phi/dadb, d2phi/db2) of the smoothed Fischer-Burmeister function
-    phi(a, b) = a + b - sqrt(a^2 + b^2 + eps^2), zero iff a, b >= 0 and a b = eps^2 / 2."""
-    rho = np.sqrt(a * a + b * b + eps**2)
-    r3 = rho**3
-    return (a + b - rho, 1 - a / rho, 1 - b / rho, -(b * b + eps**2) / r3, a * b / r3, -(a * a + eps**2) / r3)
 
 
 @dataclass
@@ -88,16 +82,18 @@ class StaticModel:
         self.n_mech = 3 * mesh.n_nodes
         """Nodal displacements in the state; the intensities of prescribed actuators follow them."""
         fixed = problem.fixed_dofs()  # (n_nodes, 3)
-        self.contact = contact_set(mesh, getattr(problem, "obstacles", []), ~fixed.all(axis=1),
-                                   problem.material.young_modulus)
-        """The contact points with the obstacles (:class:`casadi_ws.fem.contact.ContactSet`), or None; their
-        normal forces (over kappa) follow the intensities in the state."""
-        self.n_con = 0 if self.contact is None else self.contact.n
-        self.n_extra = self.n_lam + self.n_con
-        self.n_dof = self.n_mech + self.n_extra
         self.fixed_nodes = np.flatnonzero(fixed.all(axis=1))
         self.free_mech = np.flatnonzero(~fixed.ravel())
         self.n_free_mech = self.free_mech.size
+        self.contact = contact_set(mesh, getattr(problem, "obstacles", []), ~fixed.all(axis=1),
+                                   problem.material.young_modulus)
+        """The contact points with the obstacles (:class:`casadi_ws.fem.contact.ContactSet`), or None."""
+        self.terms = self._register_terms(fixed)
+        """The registered terms (:mod:`casadi_ws.fem.terms`): contact with obstacles, self-contact. Their
+        unknowns (contact forces over kappa) follow the intensities in the state."""
+        self.n_con = sum(t.n_rows for t in self.terms)
+        self.n_extra = self.n_lam + self.n_con
+        self.n_dof = self.n_mech + self.n_extra
         self.free = np.concatenate([self.free_mech, self.n_mech + np.arange(self.n_extra)])
         self.n_free = self.free.size
         self.con_rows = slice(self.n_free_mech + self.n_lam, self.n_free)
@@ -169,6 +165,20 @@ class StaticModel:
 
         self._force_scale(w)
         self._G_qp = G  # (m, n_qp, n_nodes, 3): deformation gradients for the admissibility checks
+
+    def _register_terms(self, fixed) -> list:
+        """The terms after the elements and actuators, each given its rows at the end of the state."""
+        pos = -np.ones(self.n_mech, dtype=np.int64)
+        pos[self.free_mech] = np.arange(self.n_free_mech)
+        terms = []
+        if self.contact is not None:
+            terms.append(ObstacleContact(self.contact, pos))
+        start = self.n_free_mech + self.n_lam
+        for t in terms:
+            t.rows = slice(start, start + t.n_rows)
+            t.state = slice(self.n_mech + start - self.n_free_mech, self.n_mech + start - self.n_free_mech + t.n_rows)
+            start += t.n_rows
+        return terms
 
     def _force_scale(self, w):
         """The force scale under which a residual counts as zero. Loads of exactly 0 give q = 0, but the
@@ -281,8 +291,7 @@ class StaticModel:
             j = self.n_free_mech + k
             keys += [np.full(r.size, j) * self.n_free + r, r * self.n_free + j, np.array([j * self.n_free + j])]
         n_border_keys = sum(k.size for k in keys[1 + len(self._act):])
-        con_keys = self._contact_keys(pos)
-        keys += con_keys
+        keys += [t.pattern(self, pos) for t in self.terms]
         ukey, slot = np.unique(np.concatenate(keys), return_inverse=True)
         # every element entry has a slot; those of fixed dofs go to one past the end, cut off after the
         # bincount (cheaper than gathering the kept ones on every assembly)
@@ -291,11 +300,7 @@ class StaticModel:
         self._k_slot[keep] = slot[:n_el]
         self._act_slots = slot[n_el:n_el + n_act_keys]
         border = slot[n_el + n_act_keys:n_el + n_act_keys + n_border_keys]
-        con = slot[n_el + n_act_keys + n_border_keys:]
-        self._con_slots = []  # (column, row, diagonal, curvature) slots of the contact points
-        for k in con_keys:
-            self._con_slots.append(con[: k.size])
-            con = con[k.size:]
+        self._ukey = ukey
         self._border_slots = []  # per prescribed actuator: (column slots, row slots, diagonal slot)
         for r in self._border_dofs:
             self._border_slots.append((border[: r.size], border[r.size: 2 * r.size], border[2 * r.size]))
@@ -307,32 +312,6 @@ class StaticModel:
         ccount = np.bincount(ukey // self.n_free, minlength=self.n_free)
         self._k_indptr = np.concatenate([[0], np.cumsum(ccount)]).astype(np.int32)
         self._k_nnz = ukey.size
-
-    def _contact_keys(self, pos) -> list:
-        """Pattern keys (column-major) of the contact points' entries: the column of each point's force over
-        the dofs that move it, its row, its diagonal, and the curvature couplings between its dofs. Also
-        sets the entry maps ``_ce`` (point, coordinate, weight, free dof of each nonzero of the points'
-        gradients) and ``_cp`` (pairs of entries of one point)."""
-        if not self.n_con:
-            self._ce = self._cp = None
-            return []
-        Wc = self.contact.W.tocoo()
-        order = np.lexsort((Wc.col, Wc.row))
-        pt, node, w = np.repeat(Wc.row[order], 3), np.repeat(Wc.col[order], 3), np.repeat(Wc.data[order], 3)
-        coord = np.tile(np.arange(3), order.size)
-        fpos = pos[3 * node + coord]
-        keep = fpos >= 0
-        pt, coord, w, fpos = pt[keep], coord[keep], w[keep], fpos[keep].astype(np.int64)
-        self._ce = (pt, coord, w, fpos)
-        count = np.bincount(pt, minlength=self.n_con)
-        start = np.cumsum(count) - count
-        tot = count[pt]  # each entry pairs with every entry of its point
-        e1 = np.repeat(np.arange(pt.size), tot)
-        e2 = start[pt[e1]] + (np.arange(e1.size) - np.repeat(np.cumsum(tot) - tot, tot))
-        self._cp = (e1, e2)
-        j = self.con_rows.start + np.arange(self.n_con)
-        n = self.n_free
-        return [j[pt] * n + fpos, fpos * n + j[pt], j * n + j, fpos[e2] * n + fpos[e1]]
 
     def hessian_vector_function(self):
         """The element function of d(K_e^T lam_e)/du_e (for the NLPs' Hessians), built on first use."""
@@ -371,22 +350,26 @@ class StaticModel:
         return self.assemble(ke)
 
     def assemble(self, ke: np.ndarray, actuator_weights: np.ndarray | None = None, border=None,
-                 contact=None) -> sp.csc_matrix:
+                 terms=()) -> sp.csc_matrix:
         """The free-dof matrix from element matrices ke (m, n_dof_e^2), plus actuator Hessian entries and
-        the prescribed actuators' border values ((column, row, diagonal) per actuator) and the contact points'
-        ((column, row, diagonal, curvature) values, :meth:`_contact_tangent`) if given. The pattern
-        is fixed (explicit zeros kept): factorisations reuse one ordering, and the CasADi Functions rely
-        on it."""
+        the prescribed actuators' border values ((column, row, diagonal) per actuator) and the terms'
+        (keys, values) (:meth:`casadi_ws.fem.terms.Term.tangent`) if given. The pattern is fixed (explicit
+        zeros kept): factorisations reuse one ordering, and the CasADi Functions rely on it."""
         data = np.bincount(self._k_slot, weights=ke.ravel(), minlength=self._k_nnz + 1)[: self._k_nnz]
         if actuator_weights is not None and actuator_weights.size:
             data += np.bincount(self._act_slots, weights=actuator_weights, minlength=self._k_nnz)
         for (cs, rs, ds), values in zip(self._border_slots, border or ()):
             data[cs], data[rs], data[ds] = values
-        if contact is not None:
-            (cs, rs, ds, hs), (cv, rv, dv, hv) = self._con_slots, contact
-            data[cs], data[rs], data[ds] = cv, rv, dv
-            data += np.bincount(hs, weights=hv, minlength=self._k_nnz)
+        for keys, values in terms:
+            data += np.bincount(self.slots(keys), weights=values, minlength=self._k_nnz)
         return sp.csc_matrix((data, self._k_rows, self._k_indptr), shape=(self.n_free, self.n_free))
+
+    def slots(self, keys: np.ndarray) -> np.ndarray:
+        """The positions in the pattern's data of entries given by keys (column * n_free + row)."""
+        s = np.searchsorted(self._ukey, keys)
+        if s.size and (s.max() >= self._ukey.size or np.any(self._ukey[s] != keys)):
+            raise AssertionError("a term's tangent entry is outside the pattern it declared")
+        return s
 
     # ------------------------------------------------------------------ prescribed quantities
     def _build_prescribed(self):
@@ -439,76 +422,33 @@ class StaticModel:
         return tuple(np.where(uni, f, bil) for f, bil in zip(fb, (b, zero, one, zero, zero, zero)))
 
     # ------------------------------------------------------------------ contact
-    def contact_state(self, q: np.ndarray):
-        """(gap g (k,), normal (k, 3), curvature (k, 3, 3), normal force lambda (k,) in N, gradient entries
-        dg/dq (one per entry of ``_ce``)) of the contact points at q."""
-        g, nrm, H = self.contact.gaps(self.positions(q))
-        lam = self.contact.kappa * q[self.n_mech + self.n_lam:]
-        pt, coord, w, _ = self._ce
-        return g, nrm, H, lam, w * nrm[pt, coord]
+    def _contact_terms(self):
+        return [t for t in self.terms if hasattr(t, "geometry")]
 
     def contact_forces(self, q: np.ndarray) -> np.ndarray:
-        """The forces (n_dof,) the obstacles exert on the nodes at q: sum of lambda_i dg_i/dq."""
+        """The forces (n_dof,) the obstacles (and the body on itself) exert on the nodes at q."""
         out = np.zeros(self.n_dof)
-        if self.n_con:
-            _, _, _, lam, grad = self.contact_state(q)
-            pt, _, _, fpos = self._ce
-            out[self.free] = np.bincount(fpos, weights=lam[pt] * grad, minlength=self.n_free)
+        for t in self._contact_terms():
+            out[self.free] += t.contact_forces(self, q)
         return out
 
     def in_contact(self, q: np.ndarray) -> np.ndarray:
-        """(k,) bool: the contact points that press on their obstacle at the equilibrium q (their row depends
-        more on the gap than on the force: lambda > kappa g)."""
-        g, _, _, lam, _ = self.contact_state(q)
-        return lam > self.contact.kappa * np.maximum(g, 0.0)
+        """(n_con,) bool: the contact points that press at the equilibrium q (lambda > kappa g)."""
+        return np.concatenate([t.in_contact(self, q) for t in self._contact_terms()] + [np.zeros(0, dtype=bool)])
 
     def contacts(self, q: np.ndarray) -> list[dict]:
-        """Per obstacle: its name, the total force [fx, fy, fz] (N) it exerts on the body, the number of
-        contact points pressing on it, and the largest penetration (m, 0 if none)."""
-        if not self.n_con:
-            return []
-        g, nrm, _, lam, _ = self.contact_state(q)
-        on = self.in_contact(q)
-        out = []
-        for j, ob in enumerate(self.contact.obstacles):
-            i = self.contact.obstacle == j
-            out.append({"name": ob.name, "kind": ob.kind, "force": (lam[i] @ nrm[i]).tolist(),
-                        "points": int(np.count_nonzero(on & i)),
-                        "penetration": float(max(0.0, -g[i].min())) if i.any() else 0.0})
-        return out
+        """Per obstacle (and per self-contact pair): its name, the total force [fx, fy, fz] (N) it exerts on
+        the body (on the pair's points), the number of contact points pressing, and the largest penetration
+        (m, 0 if none)."""
+        return [c for t in self._contact_terms() for c in t.report(self, q)]
+
+    def min_gap(self, q: np.ndarray) -> float:
+        """The smallest gap of any contact point at q (m; inf without contact)."""
+        return min([float(t.geometry(self, q).g.min()) for t in self._contact_terms() if t.n_rows] + [np.inf])
 
     def contact_step_limit(self, q: np.ndarray, dq: np.ndarray) -> float:
-        """The share of the Newton step dq (free dofs) to take so that no contact point now apart from its
-        obstacle ends deeper inside it than it is outside now, or than 1 % of an element (linearised): a full
-        step from far away ignores the obstacle and lands deep inside it, where the contact rows are far
-        from their solution. At least 1e-2."""
-        g, _, _, _, grad = self.contact_state(q)
-        pt, _, _, fpos = self._ce
-        dg = np.bincount(pt, weights=grad * dq[fpos], minlength=self.n_con)
-        depth = np.maximum(g, 0.01 * self.contact.h)
-        hit = (g > 0) & (g + dg < -depth)
-        if not hit.any():
-            return 1.0
-        return float(max(1e-2, np.min((g[hit] + depth[hit]) / -dg[hit])))
-
-    def _contact_residual(self, q, R):
-        """Adds -lambda dg/dq to the nodal rows of R and sets the contact rows phi(lambda, kappa g); returns
-        the state and the Fischer-Burmeister derivatives for the tangent."""
-        st = g, _, _, lam, grad = self.contact_state(q)
-        pt, _, _, fpos = self._ce
-        R -= np.bincount(fpos, weights=lam[pt] * grad, minlength=R.size)
-        fb = fischer_burmeister(lam, self.contact.kappa * g, self.contact.eps)
-        R[self.con_rows] = fb[0]
-        return st, fb
-
-    def _contact_tangent(self, st, fb):
-        """The contact's (column, row, diagonal, curvature) values for :meth:`assemble`."""
-        kap = self.contact.kappa
-        _, _, H, lam, grad = st
-        pt, coord, w, _ = self._ce
-        e1, e2 = self._cp
-        curv = -lam[pt[e1]] * w[e1] * w[e2] * H[pt[e1], coord[e1], coord[e2]]
-        return -kap * grad, fb[2][pt] * kap * grad, kap * fb[1], curv
+        """The share of the Newton step dq (free dofs) the terms allow (:meth:`ContactTerm.step_limit`)."""
+        return min([t.step_limit(self, q, dq) for t in self.terms] + [1.0])
 
     def actuator_states(self, q: np.ndarray) -> np.ndarray:
         """Each actuator's quantity at q (a cable's length in m), (n_u,)."""
@@ -557,9 +497,10 @@ class StaticModel:
         R = np.bincount(self._edofs.ravel(), weights=fe.ravel(), minlength=self.n_dof)[self.free] + ext
         if self.n_lam:
             R[self.n_free_mech:self.n_free_mech + self.n_lam] = self._prescribed_rows(q, u, Q)[0]
-        if self.n_con:
+        if self.terms:
             R0 = R.copy()
-            self._contact_residual(q, R)
+            for t in self.terms:
+                t.residual(self, q, u, R)
             ext = ext + (R0 - R)  # the contact forces join the applied ones in the scale
             ext[self.con_rows] = 0.0
         if with_scale:
@@ -593,8 +534,9 @@ class StaticModel:
                 border.append((-kap * H[a, r], pb[k] * kap * H[a, r], kap * pa[k]))
                 dRdu[:, a] = 0.0
                 dRdu[self.n_free_mech + k, a] = -pb[k] * self.kappa[k]
-        contact = self._contact_tangent(*self._contact_residual(q, R)) if self.n_con else None
-        return R, self.assemble(ke, weights, border, contact), dRdu
+        caches = [t.residual(self, q, u, R) for t in self.terms]
+        terms = [t.tangent(self, c) for t, c in zip(self.terms, caches)]
+        return R, self.assemble(ke, weights, border, terms), dRdu
 
     def actuation_rows(self, q: np.ndarray) -> np.ndarray:
         """H(q) = sign dQ/dq on the free dofs, (n_u, n_free) (a cable's row: -dL/dq): where each actuator's
@@ -653,13 +595,10 @@ class StaticModel:
         _, K, _ = self.residual_and_tangent(q, u)
         n = self.n_free_mech
         K = K[:n, :n]
-        if self.n_con:
-            g, _, _, lam, grad = self.contact_state(q)
-            pb = fischer_burmeister(lam, self.contact.kappa * g, self.contact.eps)[2]
-            pt, _, _, fpos = self._ce
-            e1, e2 = self._cp
-            K = K + sp.csc_matrix((1e3 * self.contact.kappa * pb[pt[e1]] * grad[e1] * grad[e2],
-                                   (fpos[e1], fpos[e2])), shape=(n, n))
+        for t in self.terms:
+            held = t.held(self, q)
+            if held is not None:
+                K = K + held
         if not self.n_lam:
             return K.tocsc()
         Q = self.actuator_states(q)
@@ -689,8 +628,8 @@ class StaticModel:
         Hqq = self.assemble(he) + Hact
         if self.n_lam:
             Hqq, Hqu = self._prescribed_hessian(q, u, lam, Hqq, Hqu)
-        if self.n_con:
-            Hqq = (Hqq + self._contact_hessian(q, lam)).tocsc()
+        for t in self.terms:
+            Hqq = (Hqq + t.hessian(self, q, u, lam)).tocsc()
         return Hqq, Hqu
 
     def _prescribed_hessian(self, q, u, lam, Hqq, Hqu):
@@ -725,27 +664,6 @@ class StaticModel:
             col[j] = -kap * lk * pab[k] * kap
             Hqu[:, a] = col
         return (Hqq + extra.tocsr()).tocsc(), Hqu
-
-    def _contact_hessian(self, q, lam):
-        """The contact's share of d(K^T lam)/dq (see docs/methods.md "Contact"): lam_i phi(a_i, kappa g_i(q))
-        exactly; -a_i lam . dg_i/dq without its third derivatives of the distance (zero on flat obstacles)."""
-        kap = self.contact.kappa
-        st = g, _, H, a, grad = self.contact_state(q)
-        _, pa, pb, paa, pab, pbb = fischer_burmeister(a, kap * g, self.contact.eps)
-        pt, coord, w, fpos = self._ce
-        e1, e2 = self._cp
-        mu = lam[self.con_rows]
-        j = self.con_rows.start + pt
-        d2g = w[e1] * w[e2] * H[pt[e1], coord[e1], coord[e2]]
-        qq = mu[pt[e1]] * kap * (pb[pt[e1]] * d2g + pbb[pt[e1]] * kap * grad[e1] * grad[e2])
-        # (q, force_i): -kappa d2g_i lam_m + lam_i phi_ab kappa^2 dg_i/dq
-        qs = np.bincount(e1, weights=-kap * d2g * lam[fpos[e2]],
-                         minlength=pt.size) + mu[pt] * pab[pt] * kap * kap * grad
-        jj = self.con_rows.start + np.arange(self.n_con)
-        rows = np.concatenate([fpos[e1], fpos, j, jj])
-        cols = np.concatenate([fpos[e2], j, fpos, jj])
-        vals = np.concatenate([qq, qs, qs, mu * paa * kap * kap])
-        return sp.csc_matrix((vals, (rows, cols)), shape=(self.n_free, self.n_free))
 
     @property
     def u_lower(self) -> np.ndarray:

@@ -221,11 +221,11 @@ class Exploration:
         eta = self.eta(cfg)
         todo = []
         prefilter = self.settings.prefilter
-        obstacles = self.problem.obstacles if self.model.n_con else []
-        if obstacles and self.model.contact.gaps(self.model.positions(cfg.q))[0].min() < eta:
-            # near an obstacle the linearisation cannot tell which cells are out of reach: it holds the
+        obstacles = self.problem.obstacles if self.model.contact is not None else []
+        if self.model.n_con and self.model.min_gap(cfg.q) < eta:
+            # near a contact the linearisation cannot tell which cells are out of reach: it holds the
             # contacts that releasing an input would open, and misses those a step would close (the tip then
-            # slides along the obstacle)
+            # slides along the obstacle or the body)
             prefilter = None
         for cell, target in candidates:
             if self.uniform:
