@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["ContactSet", "Obstacle", "boundary_nodes", "contact_set"]
+__all__ = ["ContactSet", "Obstacle", "boundary_nodes", "contact_set", "split_faces"]
 
 
 @dataclass
@@ -298,6 +298,15 @@ def contact_set(mesh, obstacles, moving: np.ndarray, young_modulus: float) -> Co
     W.eliminate_zeros()
     kappa = float(young_modulus * h)
     return ContactSet(list(obstacles), W, np.concatenate(owner), kappa, 1e-8 * kappa * h, h)
+
+
+def split_faces(faces: np.ndarray) -> np.ndarray:
+    """Triangles (t, 3) on the nodes of boundary faces: a 3-node face itself, a 6-node face as the four
+    triangles through its mid-edge nodes (same orientation)."""
+    faces = np.asarray(faces, dtype=np.int64)
+    if faces.shape[1] == 3:
+        return faces
+    return faces[:, [0, 3, 5, 3, 1, 4, 5, 4, 2, 3, 4, 5]].reshape(-1, 3)
 
 
 def _barycentric(c, tri):

@@ -25,8 +25,8 @@ end-effector, the mesh operators and the loads carry zero columns for the intens
 :mod:`casadi_ws.fem.materials` (CasADi SX, one graph per element type) and are evaluated over the mesh by
 :class:`casadi_ws.fem.kernels.ElementBatch`; the actuators' quantities and their derivatives are one CasADi
 function of the actuators' embedded points (:mod:`casadi_ws.actuation`). Terms that bring unknowns and rows of
-their own (contact) are registered objects (:mod:`casadi_ws.fem.terms`) every method iterates over. Assembly
-uses index maps fixed once per mesh. All matrices returned here are restricted to the free dofs.
+their own (contact with obstacles, self-contact) are registered objects (:mod:`casadi_ws.fem.terms`) every
+method iterates over. Assembly uses index maps fixed once per mesh. All matrices returned here are restricted to the free dofs.
 """
 
 from __future__ import annotations
@@ -38,8 +38,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..actuation.base import quantity_functions
-from .contact import contact_set
-from .terms import ObstacleContact, fischer_burmeister
+from .contact import contact_set, split_faces
+from .terms import ObstacleContact, SelfContact, fischer_burmeister
 from .kernels import ElementBatch
 from .materials import element_functions
 from .mesh import embed
@@ -173,6 +173,10 @@ class StaticModel:
         terms = []
         if self.contact is not None:
             terms.append(ObstacleContact(self.contact, pos))
+        moving = ~fixed.all(axis=1)
+        for pair in getattr(self.problem, "self_contact", []):
+            terms.append(SelfContact(pair["name"], pair["points"][moving[pair["points"]]], split_faces(pair["faces"]),
+                                     self.mesh.nodes, pos, self.problem.material.young_modulus, pair.get("reach")))
         start = self.n_free_mech + self.n_lam
         for t in terms:
             t.rows = slice(start, start + t.n_rows)

@@ -17,13 +17,15 @@ phi(lambda_i, kappa g_i(q)) = 0 (Signorini's conditions; docs/methods.md "Contac
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
+import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
 from .contact import ContactSet
 
-__all__ = ["ContactGeometry", "ContactTerm", "ObstacleContact", "Term", "fischer_burmeister"]
+__all__ = ["ContactGeometry", "ContactTerm", "ObstacleContact", "SelfContact", "Term", "fischer_burmeister"]
 
 
 def fischer_burmeister(a, b, eps):
@@ -242,3 +244,177 @@ class ObstacleContact(ContactTerm):
                         "penetration": float(max(0.0, -geo.g[i].min())) if i.any() else 0.0})
         return out
 
+
+@lru_cache(maxsize=None)
+def _gap_functions() -> list[ca.Function]:
+    """The distance of a point s from a triangle's plane (signed, n by the right-hand rule), from the line
+    through its first edge, and from its first vertex, each with its gradient and Hessian over
+    x = [s, a, b, c] (12)."""
+    x = ca.SX.sym("x", 12)
+    s, a, b, c = x[0:3], x[3:6], x[6:9], x[9:12]
+    n = ca.cross(b - a, c - a)
+    out = []
+    for name, g in (("plane", ca.dot(n, s - a) / ca.norm_2(n)),
+                    ("edge", ca.norm_2(ca.cross(s - a, b - a)) / ca.norm_2(b - a)),
+                    ("vertex", ca.norm_2(s - a))):
+        H = ca.densify(ca.reshape(ca.hessian(g, x)[0], 144, 1))
+        out.append(ca.Function(f"{name}_gap", [x], [g, ca.gradient(g, x), H]))
+    return out
+
+
+class SelfContact(ContactTerm):
+    """A pair of the body's own regions that may meet: the boundary nodes ``points`` may not enter the
+    boundary triangles ``triangles`` (node indices, oriented out of the body; a 10-node face is split into
+    four through its mid-edge nodes).
+
+    Each point's gap is its signed distance from the surface (libigl's AABB tree on the current positions)
+    less a radius rho = 1e-4 h: the distance to the closest triangle's plane, edge or vertex, a smooth
+    function of the point and that triangle's nodes, so the force lambda_i acts on the point and, spread over
+    the triangle's nodes, back on the surface (forces and moments balance exactly: the gap does not change
+    under a rigid motion). The sign is that of the way to the point along the normal of the triangle there
+    best aligned with it. rho rounds the triangles, as for a triangle-surface obstacle: a point held on a bare
+    edge or vertex has a cone of normals and Newton stalls; held rho away it has one. A point whose closest
+    point is on the surface's rim (an edge of one triangle only) is apart at its distance: the surface ends
+    there.
+    The pattern holds every point against every node of the surface, so the pair's size, not its motion,
+    bounds the cost (keep the regions to the parts that can meet)."""
+
+    def __init__(self, name: str, points: np.ndarray, triangles: np.ndarray, nodes: np.ndarray, pos: np.ndarray,
+                 young_modulus: float, reach: float | None = None):
+        self.name = name
+        self.points = np.asarray(points, dtype=np.int64)
+        self.master, tri = np.unique(np.asarray(triangles, dtype=np.int64), return_inverse=True)
+        self.tri = tri.reshape(-1, 3)
+        self.n_rows = self.points.size
+        edges = np.sort(np.concatenate([self.tri[:, [0, 1]], self.tri[:, [1, 2]], self.tri[:, [2, 0]]]), axis=1)
+        e, count = np.unique(edges, axis=0, return_counts=True)
+        self._rim_edges = {tuple(x) for x in e[count == 1]}
+        self._rim_vertices = set(e[count == 1].ravel().tolist())
+        self._vertex_tris = [[] for _ in range(self.master.size)]
+        for t, abc in enumerate(self.tri):
+            for v in abc:
+                self._vertex_tris[v].append(t)
+        x = nodes[self.master]
+        self.h = float(np.mean(np.linalg.norm(x[edges[:, 0]] - x[edges[:, 1]], axis=1)))
+        self.kappa = float(young_modulus * self.h)
+        self.eps = 1e-8 * self.kappa * self.h
+        self._pdofs = pos[3 * self.points[:, None] + np.arange(3)]  # (k, 3) free positions, -1 fixed
+        self._mdofs = pos[3 * self.master[:, None] + np.arange(3)]
+        self._maps = [f.map(self.n_rows) for f in _gap_functions()]
+        self.rho = 1e-4 * self.h
+        self.reach = 3.0 * self.h if reach is None else float(reach)
+        """How far (m) from the spot it faces at rest a point may slide on the surface and still be held: its
+        candidate triangles are those with a node within ``reach`` of its closest point at rest."""
+        self._candidates(nodes)
+
+    def _candidates(self, nodes):
+        """Each point's candidate triangles (as sorted keys point * n_triangles + triangle) and nodes."""
+        import igl
+        from scipy.spatial import cKDTree
+
+        V = nodes[self.master]
+        _, I0, C0 = igl.point_mesh_squared_distance(nodes[self.points], V, self.tri)
+        near = cKDTree(V).query_ball_point(C0, self.reach)
+        nt = len(self.tri)
+        keys, self._cand_nodes = [], []
+        for i, vs in enumerate(near):
+            tris = np.unique(np.concatenate([[I0[i]]] + [self._vertex_tris[v] for v in vs]).astype(np.int64))
+            keys.append(i * nt + tris)
+            self._cand_nodes.append(np.unique(self.tri[tris]))
+        self._cand = np.concatenate(keys)
+
+    def pattern(self, model, pos):
+        n, k = model.n_free, self.n_rows
+        j = self.rows.start + np.arange(k)
+        keys = [j * n + j]
+        for i in range(k):
+            d = self._pdofs[i][self._pdofs[i] >= 0]
+            md = self._mdofs[self._cand_nodes[i]].ravel()
+            every = np.concatenate([d, md[md >= 0]])
+            keys += [j[i] * n + every, every * n + j[i], (d[:, None] * n + every[None, :]).ravel(),
+                     (every[:, None] * n + d[None, :]).ravel()]
+        t = self._mdofs[self.tri].reshape(-1, 9)  # (t, 9) the dofs of each triangle
+        rr, cc = np.repeat(t, 9, axis=1), np.tile(t, (1, 9))
+        ok = (rr >= 0) & (cc >= 0)
+        keys.append(cc[ok] * n + rr[ok])
+        return np.unique(np.concatenate(keys))
+
+    def _closest(self, P, V):
+        """Per point: the triangle, its nodes ordered with the closest feature first, the feature (0 face,
+        1 edge, 2 vertex), the sign, whether the point is apart at its distance (beyond the rim, or slid beyond
+        its reach), the distance and the closest point."""
+        import igl
+
+        from .contact import _barycentric
+
+        sqd, I, C = igl.point_mesh_squared_distance(P, V, self.tri)
+        I = np.asarray(I, dtype=np.int64).copy()
+        order = self.tri[I].copy()
+        on = _barycentric(C, V[order]) > 1e-9
+        kind = 3 - on.sum(axis=1)
+        sign = np.ones(len(P))
+        apart = np.zeros(len(P), dtype=bool)
+        for i in np.flatnonzero(kind > 0):
+            feature = order[i][on[i]]
+            if len(feature) == 2 and tuple(sorted(feature)) in self._rim_edges or \
+                    len(feature) == 1 and feature[0] in self._rim_vertices:
+                apart[i] = True
+                continue
+            cand = set(self._vertex_tris[feature[0]])
+            for v in feature[1:]:
+                cand &= set(self._vertex_tris[v])
+            cand = np.array(sorted(cand))
+            a, b, c = (V[self.tri[cand, m]] for m in range(3))
+            nrm = np.cross(b - a, c - a)
+            nrm /= np.linalg.norm(nrm, axis=1)[:, None]
+            along = nrm @ (P[i] - C[i])
+            best = np.argmax(np.abs(along))
+            I[i], sign[i] = cand[best], (1.0 if along[best] >= 0 else -1.0)
+            if abs(along[best]) >= (1 - 1e-9) * np.linalg.norm(P[i] - C[i]):
+                # straight above the triangle's edge or corner: its plane (a flat surface has no rounded
+                # edge there; the edge's curvature 1/rho would stiffen the point sideways)
+                kind[i], sign[i], order[i] = 0, 1.0, self.tri[I[i]]
+                continue
+            rest = [v for v in self.tri[I[i]] if v not in feature]
+            order[i] = list(feature) + rest
+        key = np.arange(len(P)) * len(self.tri) + I
+        k = np.minimum(np.searchsorted(self._cand, key), self._cand.size - 1)
+        self.beyond_reach = (self._cand[k] != key) & ~apart
+        return order, kind, sign, apart | self.beyond_reach, np.sqrt(sqd), C
+
+    def geometry(self, model, q) -> ContactGeometry:
+        return self.at(model.positions(q))
+
+    def at(self, x: np.ndarray) -> ContactGeometry:
+        """The geometry at the nodal positions x (n, 3)."""
+        P, V = x[self.points], x[self.master]
+        T, kind, sign, apart, dist, C = self._closest(P, V)
+        X = np.hstack([P, V[T[:, 0]], V[T[:, 1]], V[T[:, 2]]]).T
+        g, grad, hess = (np.choose(kind[None, :], parts) for parts in
+                         zip(*[[np.asarray(v) for v in f(X)] for f in self._maps]))
+        g, grad, hess = sign * g.ravel() - self.rho, (sign * grad).T, (sign * hess).T
+        if apart.any():
+            d = np.maximum(dist[apart], 1e-300)
+            g[apart] = d - self.rho
+            grad[apart] = 0.0
+            grad[apart, :3] = (P[apart] - C[apart]) / d[:, None]
+            hess[apart] = 0.0
+        k = self.n_rows
+        dofs = np.hstack([self._pdofs, self._mdofs[T[:, 0]], self._mdofs[T[:, 1]], self._mdofs[T[:, 2]]])  # (k, 12)
+        pt = np.repeat(np.arange(k), 12)
+        keep = dofs.ravel() >= 0
+        entries = (pt[keep], dofs.ravel()[keep], grad.ravel()[keep])
+        r, c = np.repeat(dofs, 12, axis=1), np.tile(dofs, (1, 12))
+        ok = ((r >= 0) & (c >= 0)).ravel()
+        curvature = (np.repeat(np.arange(k), 144)[ok], r.ravel()[ok], c.ravel()[ok], hess.ravel()[ok])
+        return ContactGeometry(g, grad[:, :3], entries, curvature)
+
+    def report(self, model, q) -> list[dict]:
+        """One entry: the name, kind ``self``, the force [fx, fy, fz] (N) the surface exerts on the points
+        (the points exert the opposite on the surface), points pressing, the largest penetration (m)."""
+        geo = self.geometry(model, q)
+        lam = self.forces(q)
+        return [{"name": self.name, "kind": "self", "force": (lam @ geo.normal).tolist(),
+                 "points": int(np.count_nonzero(self.in_contact(model, q))),
+                 "penetration": float(max(0.0, -geo.g.min())) if self.n_rows else 0.0,
+                 "beyond_reach": int(np.count_nonzero(self.beyond_reach))}]

@@ -93,6 +93,9 @@ class Problem:
     """Which admissibility checks run on every reported equilibrium, and their tolerances."""
     obstacles: list = field(default_factory=list)
     """Rigid, fixed obstacles (:class:`casadi_ws.fem.contact.Obstacle`) the body may not enter."""
+    self_contact: list = field(default_factory=list)
+    """Pairs of the body's regions that may meet: ``{name, points (boundary node indices), faces (boundary
+    faces, oriented out of the body)}``; the points may not enter the faces."""
 
     def fixed_dofs(self) -> np.ndarray:
         """Mask (n_nodes, 3) of the displacement components held at zero."""
@@ -143,7 +146,8 @@ def nodes_on_plane(mesh: Mesh, point, normal, tolerance: float = 1e-9) -> np.nda
 # ---------------------------------------------------------------------------------------------------------
 
 _TOP_KEYS = {"name", "description", "mesh", "material", "material_regions", "gravity", "fixed", "cables",
-             "cavities", "end_effector", "loads", "solver", "workspace", "task", "admissibility", "obstacles"}
+             "cavities", "end_effector", "loads", "solver", "workspace", "task", "admissibility", "obstacles",
+             "self_contact"}
 _MESH_GEN = {"generate", "length", "radius_base", "radius_tip", "resolution", "size", "divisions", "origin",
              "order"}
 _MESH_FILE = {"file", "scale", "units", "order", "transform"}
@@ -719,6 +723,51 @@ def _read_obstacles(r: _Reader, lst, mesh: Mesh, base: Path) -> list:
     return out
 
 
+def _read_self_contact(r: _Reader, lst, mesh: Mesh) -> list:
+    """``self_contact``: each ``{name, points: <selection>, surface: <selection>}`` (selections as in
+    ``fixed``): the boundary nodes selected by ``points`` may not enter the boundary faces whose nodes are all
+    selected by ``surface``."""
+    from ..fem.contact import split_faces
+    from ..fem.surface import boundary_faces
+    from ..fem.terms import SelfContact
+
+    if lst is None:
+        return []
+    if not isinstance(lst, list):
+        r.fail("self_contact", "expected a list of {name, points, surface}, each a selection as in 'fixed'")
+    faces = boundary_faces(mesh)
+    out = []
+    for i, s in enumerate(lst):
+        key = f"self_contact[{i}]"
+        r.mapping(s, key, {"name", "points", "surface", "reach"})
+        sel = {}
+        for k in ("points", "surface"):
+            if k not in s:
+                r.fail(f"{key}.{k}", "missing: a selection of the body's boundary (box, sphere, plane or indices)")
+            if isinstance(s[k], dict) and "components" in s[k]:
+                r.fail(f"{key}.{k}.components", "not used here: contact acts on whole nodes")
+            sel[k], _ = _read_selection(r, s[k], mesh, f"{key}.{k}", False)
+        points = np.intersect1d(sel["points"], faces)
+        tris = faces[np.isin(faces, sel["surface"]).all(axis=1)]
+        if points.size == 0:
+            r.fail(f"{key}.points", "selects no node on the body's boundary")
+        if len(tris) == 0:
+            r.fail(f"{key}.surface", "holds no whole boundary face (every node of a face must be selected)")
+        shared = np.intersect1d(points, tris)
+        if shared.size:
+            r.fail(key, f"{shared.size} boundary node(s) are in both 'points' and 'surface': the two regions must "
+                        f"be apart")
+        name = str(s.get("name", f"self_contact{i + 1}"))
+        reach = r.optional(s, "reach", key, lo=0.0, lo_open=True)
+        term = SelfContact(name, points, split_faces(tris), mesh.nodes, np.arange(3 * mesh.n_nodes), 1.0, reach)
+        inside = np.count_nonzero(term.at(mesh.nodes).g <= 0.0)
+        if inside:
+            r.fail(key, f"{inside} of its {points.size} points lie on or behind its surface at rest (the points must "
+                        f"be outside, on the side the surface faces)")
+        out.append({"name": name, "points": points, "faces": tris, "reach": reach})
+    return out
+
+
 def _read_task(r: _Reader, value, base: Path):
     """``task``: a box or a CSV of points (:class:`casadi_ws.workspace.measures.Task`), or None."""
     if value is None:
@@ -818,8 +867,9 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     task = _read_task(r, d.get("task"), base)
     admissibility = _read_admissibility(r, d.get("admissibility"))
     name = str(d.get("name", Path(source).stem))
+    self_contact = _read_self_contact(r, d.get("self_contact"), mesh)
     return Problem(mesh, material, fixed, cables + cavities, end_effector, gravity, loads, solver, workspace, name,
-                   source, regions, task, partial_fixed, admissibility, obstacles)
+                   source, regions, task, partial_fixed, admissibility, obstacles, self_contact)
 
 
 def read_yaml(path: str | Path, what: str = "problem file", error=None):
