@@ -82,10 +82,16 @@ class ContactGeometry:
     """(k, 3) the direction each point's force pushes it (N per N of lambda)."""
     entries: tuple
     """(point, free dof, value): the nonzeros of dg/dq, grouped by point."""
-    curvature: tuple
-    """(point, free row, free column, value): the nonzeros of d2g/dq2."""
+    curvature: object
+    """(point, free row, free column, value): the nonzeros of d2g/dq2, or a function returning them (called
+    once, when the tangent or the Hessian first needs them: :meth:`second`)."""
     pairs: tuple | None = None
     """(e1, e2): every pair of entries of one point (computed if None)."""
+
+    def second(self) -> tuple:
+        if callable(self.curvature):
+            self.curvature = self.curvature()
+        return self.curvature
 
 
 def _pairs(pt: np.ndarray):
@@ -132,7 +138,7 @@ class ContactTerm(Term):
         geo, lam, fb = cache
         kap, n = self.kappa, model.n_free
         pt, fpos, val = geo.entries
-        cp, r, c, d2g = geo.curvature
+        cp, r, c, d2g = geo.second()
         col, row = self._keys(model, pt, fpos)
         j = self.rows.start + np.arange(self.n_rows)
         keys = np.concatenate([col, row, j * n + j, c * n + r])
@@ -149,15 +155,18 @@ class ContactTerm(Term):
         """(k,) bool: the points that press (their row depends more on the gap than on the force)."""
         return self.forces(q) > self.kappa * np.maximum(self.geometry(model, q).g, 0.0)
 
+    dive = True
+    """Whether a point far apart may end as deep inside as it was outside (else 1 % of an element at most)."""
+
     def step_limit(self, model, q, dq) -> float:
-        """No point now apart ends deeper inside than it is outside now, or than 1 % of an element
-        (linearised): a full step from far away ignores the contact and lands deep inside, where the rows
-        are far from their solution. At least 1e-2."""
+        """No point now apart ends deeper inside than it is outside now (:attr:`dive`), or than 1 % of an
+        element (linearised): a full step from far away ignores the contact and lands deep inside, where the
+        rows are far from their solution. At least 1e-2."""
         geo = self.geometry(model, q)
         pt, fpos, val = geo.entries
         g = geo.g
         dg = np.bincount(pt, weights=val * dq[fpos], minlength=self.n_rows)
-        depth = np.maximum(g, 0.01 * self.h)
+        depth = np.maximum(g, 0.01 * self.h) if self.dive else np.full_like(g, 0.01 * self.h)
         hit = (g > 0) & (g + dg < -depth)
         if not hit.any():
             return 1.0
@@ -180,7 +189,7 @@ class ContactTerm(Term):
         a = self.forces(q)
         _, pa, pb, paa, pab, pbb = fischer_burmeister(a, kap * geo.g, self.eps)
         pt, fpos, val = geo.entries
-        cp, r, c, d2g = geo.curvature
+        cp, r, c, d2g = geo.second()
         e1, e2 = geo.pairs if geo.pairs is not None else _pairs(pt)
         mu = lam[self.rows]
         j = self.rows.start + pt
@@ -245,21 +254,46 @@ class ObstacleContact(ContactTerm):
         return out
 
 
+MLS_SLOTS = 10
+"""Triangles a point's surface is fitted to, at most: those whose centroids lie within one mean edge h,
+nearest first (4 to 10 at the surface of the shipped gripper's 10-node mesh; a dropped farthest one weighs
+little, its centroid near the edge of the support)."""
+
+
 @lru_cache(maxsize=None)
-def _gap_functions() -> list[ca.Function]:
-    """The distance of a point s from a triangle's plane (signed, n by the right-hand rule), from the line
-    through its first edge, and from its first vertex, each with its gradient and Hessian over
-    x = [s, a, b, c] (12)."""
-    x = ca.SX.sym("x", 12)
-    s, a, b, c = x[0:3], x[3:6], x[6:9], x[9:12]
-    n = ca.cross(b - a, c - a)
-    out = []
-    for name, g in (("plane", ca.dot(n, s - a) / ca.norm_2(n)),
-                    ("edge", ca.norm_2(ca.cross(s - a, b - a)) / ca.norm_2(b - a)),
-                    ("vertex", ca.norm_2(s - a))):
-        H = ca.densify(ca.reshape(ca.hessian(g, x)[0], 144, 1))
-        out.append(ca.Function(f"{name}_gap", [x], [g, ca.gradient(g, x), H]))
-    return out
+def _mls_gap(second: bool):
+    """The gap of a point P from the surface fitted to up to MLS_SLOTS triangles near it, with its gradient
+    (and with ``second`` its Hessian) over x = [P, the triangles' corners] (3 + 9 MLS_SLOTS), as an
+    :class:`casadi_ws.fem.kernels.ElementBatch` (inputs x, used, r^2).
+
+    Triangle k (corners a, b, c, centroid m_k, area vector A_k) weighs w_k = (1 - |P - m_k|^2 / r^2)^3 within
+    r (zero beyond, twice differentiable there); the surface near P is the plane through the weighted
+    centroid x = sum w |A| m / sum w |A| with normal n = sum w A / |sum w A|, and g = n . (P - x). A flat
+    surface gives the exact distance; a kinked one (a vertex dented under a point) a smooth normal."""
+    from .kernels import ElementBatch
+
+    K = MLS_SLOTS
+    x = ca.SX.sym("x", 3 + 9 * K)
+    used = ca.SX.sym("used", K)  # 1 for a triangle, 0 for an empty slot
+    r2 = ca.SX.sym("r2")
+    P = x[0:3]
+    normal, weight, centre = 0, 0, 0
+    for k in range(K):
+        a, b, c = (x[3 + 9 * k + 3 * j: 6 + 9 * k + 3 * j] for j in range(3))
+        m = (a + b + c) / 3
+        A = 0.5 * ca.cross(b - a, c - a)
+        w = used[k] * ca.fmax(0, 1 - ca.sumsqr(P - m) / r2) ** 3
+        normal += w * A
+        weight += w * ca.norm_2(A)
+        centre += w * ca.norm_2(A) * m
+    g = ca.dot(normal / ca.norm_2(normal), P - centre / weight)
+    out = [g, ca.gradient(g, x)]
+    if second:
+        out.append(ca.densify(ca.reshape(ca.hessian(g, x)[0], (3 + 9 * K) ** 2, 1)))
+    # the Hessian's C takes gcc ~80 s; on CasADi's machine it costs ~1.4 ms per point near the surface, once
+    # per tangent: far below a factorisation
+    return ElementBatch(ca.Function("mls_gap2" if second else "mls_gap1", [x, used, r2], out),
+                        "casadi" if second else "auto")
 
 
 class SelfContact(ContactTerm):
@@ -267,17 +301,19 @@ class SelfContact(ContactTerm):
     boundary triangles ``triangles`` (node indices, oriented out of the body; a 10-node face is split into
     four through its mid-edge nodes).
 
-    Each point's gap is its signed distance from the surface (libigl's AABB tree on the current positions)
-    less a radius rho = 1e-4 h: the distance to the closest triangle's plane, edge or vertex, a smooth
-    function of the point and that triangle's nodes, so the force lambda_i acts on the point and, spread over
-    the triangle's nodes, back on the surface (forces and moments balance exactly: the gap does not change
-    under a rigid motion). The sign is that of the way to the point along the normal of the triangle there
-    best aligned with it. rho rounds the triangles, as for a triangle-surface obstacle: a point held on a bare
-    edge or vertex has a cone of normals and Newton stalls; held rho away it has one. A point whose closest
-    point is on the surface's rim (an edge of one triangle only) is apart at its distance: the surface ends
-    there.
-    The pattern holds every point against every node of the surface, so the pair's size, not its motion,
-    bounds the cost (keep the regions to the parts that can meet)."""
+    A point near the surface (a triangle's centroid within one mean edge h) measures its gap from the
+    surface fitted to the triangles there (:func:`_mls_gap`): a smooth function of the point and those
+    triangles' nodes, so the force lambda_i acts on the point and, spread over the nodes, back on the
+    surface (forces and moments balance exactly: the gap does not change under a rigid motion). A point
+    farther away is apart at its distance (libigl's AABB tree); so is one whose closest point is on the
+    surface's rim (an edge of one triangle only: the surface ends there). The closest plane of a triangle
+    mesh would not do: a point pressing on a vertex dents the surface into a cone whose faces take turns
+    being closest, the normal jumps between them and Newton cycles (it did, on the shipped gripper).
+
+    The pattern holds each point against every node within ``reach`` of the spot it faces at rest; a point
+    that slides farther is not held and is counted (``beyond_reach``)."""
+
+    dive = False  # a body diving into itself brings many points in that Newton then releases one by one
 
     def __init__(self, name: str, points: np.ndarray, triangles: np.ndarray, nodes: np.ndarray, pos: np.ndarray,
                  young_modulus: float, reach: float | None = None):
@@ -290,128 +326,165 @@ class SelfContact(ContactTerm):
         e, count = np.unique(edges, axis=0, return_counts=True)
         self._rim_edges = {tuple(x) for x in e[count == 1]}
         self._rim_vertices = set(e[count == 1].ravel().tolist())
-        self._vertex_tris = [[] for _ in range(self.master.size)]
-        for t, abc in enumerate(self.tri):
-            for v in abc:
-                self._vertex_tris[v].append(t)
         x = nodes[self.master]
         self.h = float(np.mean(np.linalg.norm(x[edges[:, 0]] - x[edges[:, 1]], axis=1)))
         self.kappa = float(young_modulus * self.h)
         self.eps = 1e-8 * self.kappa * self.h
         self._pdofs = pos[3 * self.points[:, None] + np.arange(3)]  # (k, 3) free positions, -1 fixed
         self._mdofs = pos[3 * self.master[:, None] + np.arange(3)]
-        self._maps = [f.map(self.n_rows) for f in _gap_functions()]
-        self.rho = 1e-4 * self.h
-        self.reach = 3.0 * self.h if reach is None else float(reach)
-        """How far (m) from the spot it faces at rest a point may slide on the surface and still be held: its
-        candidate triangles are those with a node within ``reach`` of its closest point at rest."""
+        self.reach = 2.0 * self.h if reach is None else float(reach)
+        """How far (m) from the spot it faces at rest a point may slide on the surface and still be held."""
+        self.beyond_reach = np.zeros(self.n_rows, dtype=bool)
         self._candidates(nodes)
 
     def _candidates(self, nodes):
-        """Each point's candidate triangles (as sorted keys point * n_triangles + triangle) and nodes."""
+        """Each point's candidate triangles (those with a node within ``reach`` of its closest point at rest,
+        and that one) as pairs (point, triangle) sorted by point, and their nodes."""
         import igl
         from scipy.spatial import cKDTree
 
         V = nodes[self.master]
         _, I0, C0 = igl.point_mesh_squared_distance(nodes[self.points], V, self.tri)
         near = cKDTree(V).query_ball_point(C0, self.reach)
-        nt = len(self.tri)
-        keys, self._cand_nodes = [], []
+        self._vertex_tris = vertex_tris = [[] for _ in range(self.master.size)]
+        for t, abc in enumerate(self.tri):
+            for v in abc:
+                vertex_tris[v].append(t)
+        pts, tris, self._cand_nodes = [], [], []
         for i, vs in enumerate(near):
-            tris = np.unique(np.concatenate([[I0[i]]] + [self._vertex_tris[v] for v in vs]).astype(np.int64))
-            keys.append(i * nt + tris)
-            self._cand_nodes.append(np.unique(self.tri[tris]))
-        self._cand = np.concatenate(keys)
+            t = np.unique(np.concatenate([[I0[i]]] + [vertex_tris[v] for v in vs]).astype(np.int64))
+            pts.append(np.full(t.size, i))
+            tris.append(t)
+            self._cand_nodes.append(np.unique(self.tri[t]))
+        self._cand_pt, self._cand_tri = np.concatenate(pts), np.concatenate(tris)
+        self._cand = self._cand_pt * len(self.tri) + self._cand_tri
+        # each point's support radius: h, or less where more than MLS_SLOTS triangles would lie within it at
+        # rest (a triangle left out of the slots while it still weighs would make the gap jump)
+        m = V[self.tri].mean(axis=1)
+        d = np.linalg.norm(m[self._cand_tri] - C0[self._cand_pt], axis=1)
+        self.radius = np.full(self.n_rows, self.h)
+        for i in range(self.n_rows):
+            di = np.sort(d[self._cand_pt == i])
+            if di.size > MLS_SLOTS:
+                self.radius[i] = min(self.h, 0.5 * (di[MLS_SLOTS - 1] + di[MLS_SLOTS]))
 
     def pattern(self, model, pos):
         n, k = model.n_free, self.n_rows
         j = self.rows.start + np.arange(k)
         keys = [j * n + j]
         for i in range(k):
-            d = self._pdofs[i][self._pdofs[i] >= 0]
-            md = self._mdofs[self._cand_nodes[i]].ravel()
-            every = np.concatenate([d, md[md >= 0]])
-            keys += [j[i] * n + every, every * n + j[i], (d[:, None] * n + every[None, :]).ravel(),
-                     (every[:, None] * n + d[None, :]).ravel()]
-        t = self._mdofs[self.tri].reshape(-1, 9)  # (t, 9) the dofs of each triangle
-        rr, cc = np.repeat(t, 9, axis=1), np.tile(t, (1, 9))
-        ok = (rr >= 0) & (cc >= 0)
-        keys.append(cc[ok] * n + rr[ok])
+            d = np.concatenate([self._pdofs[i], self._mdofs[self._cand_nodes[i]].ravel()])
+            d = d[d >= 0]
+            keys += [j[i] * n + d, d * n + j[i], (d[:, None] * n + d[None, :]).ravel()]
         return np.unique(np.concatenate(keys))
 
-    def _closest(self, P, V):
-        """Per point: the triangle, its nodes ordered with the closest feature first, the feature (0 face,
-        1 edge, 2 vertex), the sign, whether the point is apart at its distance (beyond the rim, or slid beyond
-        its reach), the distance and the closest point."""
+    def _apart(self, P, V):
+        """(distance, closest point, closest triangle, apart): apart where the closest point is on the rim or
+        beyond reach."""
         import igl
 
         from .contact import _barycentric
 
         sqd, I, C = igl.point_mesh_squared_distance(P, V, self.tri)
         I = np.asarray(I, dtype=np.int64).copy()
-        order = self.tri[I].copy()
-        on = _barycentric(C, V[order]) > 1e-9
-        kind = 3 - on.sum(axis=1)
-        sign = np.ones(len(P))
+        on = _barycentric(C, V[self.tri[I]]) > 1e-9
         apart = np.zeros(len(P), dtype=bool)
-        for i in np.flatnonzero(kind > 0):
-            feature = order[i][on[i]]
-            if len(feature) == 2 and tuple(sorted(feature)) in self._rim_edges or \
-                    len(feature) == 1 and feature[0] in self._rim_vertices:
-                apart[i] = True
-                continue
-            cand = set(self._vertex_tris[feature[0]])
-            for v in feature[1:]:
-                cand &= set(self._vertex_tris[v])
-            cand = np.array(sorted(cand))
-            a, b, c = (V[self.tri[cand, m]] for m in range(3))
-            nrm = np.cross(b - a, c - a)
-            nrm /= np.linalg.norm(nrm, axis=1)[:, None]
-            along = nrm @ (P[i] - C[i])
-            best = np.argmax(np.abs(along))
-            I[i], sign[i] = cand[best], (1.0 if along[best] >= 0 else -1.0)
-            if abs(along[best]) >= (1 - 1e-9) * np.linalg.norm(P[i] - C[i]):
-                # straight above the triangle's edge or corner: its plane (a flat surface has no rounded
-                # edge there; the edge's curvature 1/rho would stiffen the point sideways)
-                kind[i], sign[i], order[i] = 0, 1.0, self.tri[I[i]]
-                continue
-            rest = [v for v in self.tri[I[i]] if v not in feature]
-            order[i] = list(feature) + rest
+        for i in np.flatnonzero(on.sum(axis=1) < 3):
+            feature = self.tri[I[i]][on[i]]
+            apart[i] = len(feature) == 2 and tuple(sorted(feature)) in self._rim_edges or \
+                len(feature) == 1 and feature[0] in self._rim_vertices
+            # on an edge or a corner: the triangle there whose normal points most nearly at the point (above
+            # a body's edge a point faces the top, not the side it would slide down)
+            cand = np.array(sorted(set.intersection(*[set(self._vertex_tris[v]) for v in feature])))
+            T = V[self.tri[cand]]
+            n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+            I[i] = cand[np.argmax((n / np.linalg.norm(n, axis=1)[:, None]) @ (P[i] - C[i]))]
         key = np.arange(len(P)) * len(self.tri) + I
         k = np.minimum(np.searchsorted(self._cand, key), self._cand.size - 1)
         self.beyond_reach = (self._cand[k] != key) & ~apart
-        return order, kind, sign, apart | self.beyond_reach, np.sqrt(sqd), C
+        return np.sqrt(sqd), C, I, apart | self.beyond_reach
+
+    def _slots(self, P, V, I):
+        """(k, MLS_SLOTS) the candidate triangles whose centroids lie within its radius of each point and that face
+        the way its closest triangle I does (within 60 degrees: a dent is smoothed, an edge of the body is
+        not rounded off), nearest first (-1: empty)."""
+        T = V[self.tri]
+        m = T.mean(axis=1)
+        n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+        n /= np.linalg.norm(n, axis=1)[:, None]
+        d2 = np.einsum("ij,ij->i", P[self._cand_pt] - m[self._cand_tri], P[self._cand_pt] - m[self._cand_tri])
+        facing = np.einsum("ij,ij->i", n[self._cand_tri], n[I[self._cand_pt]]) > 0.5
+        inside = np.flatnonzero((d2 < self.radius[self._cand_pt] ** 2) & facing)
+        order = inside[np.lexsort((d2[inside], self._cand_pt[inside]))]
+        pt = self._cand_pt[order]
+        first = np.searchsorted(pt, pt)  # where each point's run starts
+        rank = np.arange(pt.size) - first
+        keep = rank < MLS_SLOTS
+        slots = -np.ones((self.n_rows, MLS_SLOTS), dtype=np.int64)
+        slots[pt[keep], rank[keep]] = self._cand_tri[order[keep]]
+        return slots
+
+    def signed_distance(self, x: np.ndarray) -> np.ndarray:
+        """Each point's distance from the surface at the nodal positions x, negative behind it (the side its
+        closest triangle faces away from)."""
+        P, V = x[self.points], x[self.master]
+        dist, C, I, _ = self._apart(P, V)
+        T = V[self.tri[I]]
+        n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+        return np.where(np.einsum("ij,ij->i", n, P - C) < 0, -dist, dist)
 
     def geometry(self, model, q) -> ContactGeometry:
         return self.at(model.positions(q))
 
     def at(self, x: np.ndarray) -> ContactGeometry:
-        """The geometry at the nodal positions x (n, 3)."""
+        """The geometry at the nodal positions x (n, 3); its curvature is computed when first asked for."""
         P, V = x[self.points], x[self.master]
-        T, kind, sign, apart, dist, C = self._closest(P, V)
-        X = np.hstack([P, V[T[:, 0]], V[T[:, 1]], V[T[:, 2]]]).T
-        g, grad, hess = (np.choose(kind[None, :], parts) for parts in
-                         zip(*[[np.asarray(v) for v in f(X)] for f in self._maps]))
-        g, grad, hess = sign * g.ravel() - self.rho, (sign * grad).T, (sign * hess).T
-        if apart.any():
-            d = np.maximum(dist[apart], 1e-300)
-            g[apart] = d - self.rho
-            grad[apart] = 0.0
-            grad[apart, :3] = (P[apart] - C[apart]) / d[:, None]
-            hess[apart] = 0.0
-        k = self.n_rows
-        dofs = np.hstack([self._pdofs, self._mdofs[T[:, 0]], self._mdofs[T[:, 1]], self._mdofs[T[:, 2]]])  # (k, 12)
-        pt = np.repeat(np.arange(k), 12)
-        keep = dofs.ravel() >= 0
-        entries = (pt[keep], dofs.ravel()[keep], grad.ravel()[keep])
-        r, c = np.repeat(dofs, 12, axis=1), np.tile(dofs, (1, 12))
-        ok = ((r >= 0) & (c >= 0)).ravel()
-        curvature = (np.repeat(np.arange(k), 144)[ok], r.ravel()[ok], c.ravel()[ok], hess.ravel()[ok])
-        return ContactGeometry(g, grad[:, :3], entries, curvature)
+        dist, C, I, apart = self._apart(P, V)
+        slots = self._slots(P, V, I)
+        near = np.flatnonzero((slots[:, 0] >= 0) & ~apart)
+        k, nx = self.n_rows, 3 + 9 * MLS_SLOTS
+        g = dist.copy()
+        normal = (P - C) / np.maximum(dist, 1e-300)[:, None]
+        # points apart: their distance, moved by the point alone
+        far = np.setdiff1d(np.arange(k), near)
+        pt_e = [np.repeat(far, 3)]
+        dof_e = [self._pdofs[far].ravel()]
+        val_e = [normal[far].ravel()]
+        curv = [np.zeros(0, dtype=np.int64)] * 3 + [np.zeros(0)]
+        curvature = (lambda: curv)
+        if near.size:
+            s = slots[near]
+            filled = np.where(s >= 0, s, s[:, :1])  # empty slots repeat the first triangle, unweighted
+            corners = self.tri[filled]  # (b, K, 3)
+            X = np.hstack([P[near], V[corners].reshape(near.size, -1)])
+            used = (s >= 0).astype(float)
+            r2 = self.radius[near, None] ** 2
+            gn, grad = _mls_gap(False)(X, used, r2)
+            g[near] = gn.ravel()
+            normal[near] = grad[:, :3]
+            dofs = np.hstack([self._pdofs[near], np.where((s >= 0)[:, :, None, None],
+                                                          self._mdofs[corners], -1).reshape(near.size, -1)])
+            pt = np.repeat(near, nx)
+            ok = dofs.ravel() >= 0
+            pt_e.append(pt[ok])
+            dof_e.append(dofs.ravel()[ok])
+            val_e.append(grad.ravel()[ok])
+
+            def curvature():
+                hess = _mls_gap(True)(X, used, r2)[2]
+                r, c = np.repeat(dofs, nx, axis=1), np.tile(dofs, (1, nx))
+                ok = ((r >= 0) & (c >= 0)).ravel()
+                return np.repeat(near, nx * nx)[ok], r.ravel()[ok], c.ravel()[ok], hess.ravel()[ok]
+        pt, dof, val = np.concatenate(pt_e), np.concatenate(dof_e), np.concatenate(val_e)
+        keep = dof >= 0
+        order = np.argsort(pt[keep], kind="stable")
+        entries = (pt[keep][order], dof[keep][order], val[keep][order])
+        return ContactGeometry(g, normal, entries, curvature)
 
     def report(self, model, q) -> list[dict]:
         """One entry: the name, kind ``self``, the force [fx, fy, fz] (N) the surface exerts on the points
-        (the points exert the opposite on the surface), points pressing, the largest penetration (m)."""
+        (the points exert the opposite on the surface), points pressing, the largest penetration (m), and the
+        points that slid beyond ``reach``."""
         geo = self.geometry(model, q)
         lam = self.forces(q)
         return [{"name": self.name, "kind": "self", "force": (lam @ geo.normal).tolist(),

@@ -760,7 +760,7 @@ def _read_self_contact(r: _Reader, lst, mesh: Mesh) -> list:
         name = str(s.get("name", f"self_contact{i + 1}"))
         reach = r.optional(s, "reach", key, lo=0.0, lo_open=True)
         term = SelfContact(name, points, split_faces(tris), mesh.nodes, np.arange(3 * mesh.n_nodes), 1.0, reach)
-        inside = np.count_nonzero(term.at(mesh.nodes).g <= 0.0)
+        inside = np.count_nonzero(np.minimum(term.at(mesh.nodes).g, term.signed_distance(mesh.nodes)) <= 0.0)
         if inside:
             r.fail(key, f"{inside} of its {points.size} points lie on or behind its surface at rest (the points must "
                         f"be outside, on the side the surface faces)")
