@@ -2,9 +2,10 @@
 (problems/finger_object.yaml) and the 2-cable trunk pulled onto a table (problems/trunk_table.yaml).
 Each is timed with its obstacles and with them removed (``obstacles = []``, the same problem otherwise):
 one equilibrium (from rest, and warm-started from a neighbour), the forward method, and for the trunk
-forward-backward at its default step.
+forward-backward at its default step. Self-contact: the pinch gripper (problems/pinch_gripper.yaml) with
+its jaws' pair and without (``self_contact = []``): equilibria, the tangent's size and one LU, forward.
 
-    python scripts/bench_contact.py
+    python scripts/bench_contact.py [--self-contact-only]
 """
 
 from __future__ import annotations
@@ -61,14 +62,50 @@ def workspaces(name, nd, fb):
         print(line)
 
 
+def self_contact():
+    import sys
+
+    from scipy.sparse.linalg import splu
+
+    a = load_problem(REPO / "problems" / "pinch_gripper.yaml")
+    b = load_problem(REPO / "problems" / "pinch_gripper.yaml")
+    b.self_contact = []
+    for label, pb in (("with self-contact", a), ("without", b)):
+        m = StaticModel(pb)
+        for u in ([1.5, 0.0], [0.0, 1.5], [1.5, 1.5], [0.5, 0.0]):
+            u = np.array(u)
+            e = solve_equilibrium(m, u)
+            t = best_of(lambda: solve_equilibrium(m, u), 2)
+            pressing = sum(c["points"] for c in m.contacts(e.q))
+            print(f"gripper {label} (free dofs {m.n_free}): u = {u}: {t:.2f} s ({e.iterations} it, "
+                  f"{e.factorizations} LUs, {e.load_steps} load steps), {pressing} points pressing", flush=True)
+        _, K, _ = m.residual_and_tangent(e.q, u)
+        t_lu = best_of(lambda: splu(K.tocsc()), 2)
+        t_r = best_of(lambda: m.residual(e.q, u), 5)
+        t_k = best_of(lambda: m.residual_and_tangent(e.q, u), 3)
+        print(f"gripper {label}: tangent nnz {K.nnz}, one LU {t_lu:.2f} s, residual {t_r * 1e3:.1f} ms, "
+              f"residual and tangent {t_k * 1e3:.0f} ms", flush=True)
+        t0 = time.perf_counter()
+        fw = forward(pb, 5, ForwardSettings(progress=False), model=m)
+        print(f"gripper {label}: forward n_d = 5: {time.perf_counter() - t0:.1f} s, {fw.n_points} points, "
+              f"{fw.n_failed} failed", flush=True)
+        sys.stdout.flush()
+
+
 def main():
+    import sys
+
     print(machine())
+    if "--self-contact-only" in sys.argv:
+        self_contact()
+        return
     equilibria("finger_object.yaml", np.array([0.016]), np.array([0.015]))
     equilibria("finger_object.yaml", np.array([0.010]), np.array([0.009]))
     equilibria("trunk_table.yaml", np.array([40.0, 80.0]), np.array([40.0, 75.0]))
     equilibria("trunk_table.yaml", np.array([40.0, 20.0]), np.array([40.0, 15.0]))
     workspaces("finger_object.yaml", 41, fb=False)
     workspaces("trunk_table.yaml", 21, fb=True)
+    self_contact()
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 """The README's pictures of contact: SoftRobots' finger closing on an egg (problems/finger_object.yaml) at
-five shortenings of its cable, with the egg's push; and the workspace of the trunk pulled onto a table
-(problems/trunk_table.yaml) by the forward method, side view, with the table.
+five shortenings of its cable, with the egg's push; the workspace of the trunk pulled onto a table
+(problems/trunk_table.yaml) by the forward method, side view, with the table; and the pinch gripper
+(problems/pinch_gripper.yaml) whose jaws press on each other (self-contact), at four pairs of tensions.
 
     python scripts/contact_pictures.py [--out docs]
 """
@@ -81,10 +82,40 @@ def trunk(out: Path) -> None:
     plt.close(fig)
 
 
+def gripper(out: Path) -> None:
+    problem = load_problem(PROBLEMS / "pinch_gripper.yaml")
+    model = StaticModel(problem)
+    faces = boundary_faces(problem.mesh)[:, :3]
+    inputs = ([0.0, 0.0], [1.5, 0.0], [0.0, 1.5], [1.5, 1.5])
+    fig, axes = plt.subplots(1, len(inputs), figsize=(12, 3.4), sharey=True)
+    for ax, u in zip(axes, inputs):
+        eq = solve_equilibrium(model, np.array(u))
+        x = model.positions(eq.q) * 1e3
+        (c,) = model.contacts(eq.q)
+        ax.add_collection(PolyCollection(x[faces][:, :, [0, 2]], facecolor="tab:blue", edgecolor="none",
+                                         alpha=0.15))
+        tip = model.tip(eq.q) * 1e3
+        ax.plot(tip[0], tip[2], "k+", ms=8)
+        title = f"tensions {u[0]:.1f}, {u[1]:.1f} N"
+        if c["points"]:
+            title += f"\njaws press: {np.linalg.norm(c['force']):.3f} N"
+        ax.set_title(title, fontsize=9)
+        ax.set_aspect("equal")
+        ax.autoscale()
+        ax.set_xlabel("x (mm)")
+    axes[0].set_ylabel("z (mm)")
+    fig.suptitle("Pinch gripper: one body, its jaws in frictionless self-contact (side view, + the end-effector)",
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out / "contact_gripper.png", dpi=120)
+    plt.close(fig)
+
+
 if __name__ == "__main__":
     a = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     a.add_argument("--out", type=Path, default=Path("docs"))
     out = a.parse_args().out
     finger(out)
     trunk(out)
-    print(f"wrote {out}/contact_finger.png, {out}/contact_trunk_table.png")
+    gripper(out)
+    print(f"wrote {out}/contact_finger.png, {out}/contact_trunk_table.png, {out}/contact_gripper.png")

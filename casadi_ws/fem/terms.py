@@ -445,6 +445,12 @@ class SelfContact(ContactTerm):
         k, nx = self.n_rows, 3 + 9 * MLS_SLOTS
         g = dist.copy()
         normal = (P - C) / np.maximum(dist, 1e-300)[:, None]
+        # a point slid beyond its reach and behind the surface: its (negative) distance, so that verification
+        # fails rather than the point passing unseen
+        if self.beyond_reach.any():
+            behind = self.beyond_reach & (self.signed_distance(x) < 0)
+            g[behind] *= -1.0
+            normal[behind] *= -1.0
         # points apart: their distance, moved by the point alone
         far = np.setdiff1d(np.arange(k), near)
         pt_e = [np.repeat(far, 3)]
