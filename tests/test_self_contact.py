@@ -1,5 +1,6 @@
-"""Self-contact: one body pressing on itself, checked against beam theory (two cantilevers of one mesh, the
-upper pushed onto the lower), Newton's third law, the admissibility check, and finite differences."""
+"""Self-contact: one body pressing on itself, checked against beam theory (two cantilevers of one body,
+joined at their clamped root, the upper pushed onto the lower), Newton's third law, the admissibility check,
+and finite differences."""
 
 import json
 from pathlib import Path
@@ -11,26 +12,35 @@ import yaml
 
 from casadi_ws import StaticModel, problem_from_dict, solve_equilibrium
 from casadi_ws.cli import main
-from casadi_ws.fem.mesh import box_mesh
+from casadi_ws.fem.mesh import _hex_grid_to_tets, _orient
 from casadi_ws.solvers.admissible import admissibility
 
 L, B, T, E, GAP = 0.2, 0.01, 0.01, 1e6, 0.002
-"""Two slender beams (m, Pa): L/T = 20, the upper GAP above the lower, both clamped at x = 0."""
+"""Two slender beams of one body (m, Pa): L/T = 20, the upper GAP above the lower, both clamped at x = 0."""
 EI = E * B * T**3 / 12
 
 
 def _beams(tmp_path: Path, contact=True, order=2, divisions=(20, 2, 2), load=None) -> dict:
-    """The upper beam (length L) above a lower one of length 1.25 L (so the upper's tip lands on the lower's
-    top face, not on its corner), one mesh; a tip load on the upper twice what closes the gap."""
-    n = divisions[0]
-    lo = box_mesh((1.25 * L, B, T), (n * 5 // 4,) + tuple(divisions[1:]), (0, -B / 2, 0))
-    up = box_mesh((L, B, T), divisions, (0, -B / 2, T + GAP))
-    meshio.write(tmp_path / "beams.vtu", meshio.Mesh(np.vstack([lo.nodes, up.nodes]),
-                                                     [("tetra", np.vstack([lo.tets, up.tets + lo.n_nodes]))]))
+    """One body: two beams (the upper of length L, the lower ~1.25 L, so that the upper's tip lands on the
+    lower's face, not on its corner) joined by a root block behind x = 0, which is clamped; a tip load on the
+    upper twice what closes the gap. One structured grid with the slot's cells left out (conforming)."""
+    n, ny, nz = divisions
+    dx = L / n
+    xs = dx * np.arange(-1, n * 5 // 4 + 1)  # the root block's cell, then the beams
+    ys = np.linspace(-B / 2, B / 2, ny + 1)
+    zs = np.concatenate([np.linspace(0, T, nz + 1), T + GAP + np.linspace(0, T, nz + 1)])
+    Z, Y, X = np.meshgrid(zs, ys, xs, indexing="ij")
+    nodes = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
+    tets = _orient(nodes, _hex_grid_to_tets((len(xs) - 1, ny, len(zs) - 1)))
+    c = nodes[tets].mean(axis=1)
+    slot = (c[:, 0] > 0) & (c[:, 2] > T) & (c[:, 2] < T + GAP)
+    beyond = (c[:, 0] > L) & (c[:, 2] > T + GAP)
+    used, tets = np.unique(tets[~(slot | beyond)], return_inverse=True)
+    meshio.write(tmp_path / "beams.vtu", meshio.Mesh(nodes[used], [("tetra", tets.reshape(-1, 4))]))
     P = 2 * GAP * 3 * EI / L**3 if load is None else load
     d = {"mesh": {"file": "beams.vtu", "order": order},
          "material": {"young_modulus": E, "poisson_ratio": 0.0, "model": "linear"},
-         "fixed": {"box": [-1e-6, -1, -1, 1e-6, 1, 1]},
+         "fixed": {"box": [-1, -1, -1, 1e-6, 1, 1]},  # the root block and the beams' ends
          "loads": [{"point": [L, 0, 1.5 * T + GAP], "force": [0, 0, -P]}],
          "cables": [{"points": [[0.1, 0, 0.002], [0.15, 0, 0.002]], "pull_point": [0, 0, 0.002], "u_max": 0.01}],
          "end_effector": [L, 0, 1.5 * T + GAP]}

@@ -269,6 +269,10 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
                 ok = True
             if not ok and not fresh and np.isfinite(theta):
                 ok = bool(np.linalg.norm(R_try) / scale_try < 1e-2 * rel)
+            if not ok and fresh and getattr(model, "n_con", 0) and np.isfinite(theta):
+                # a contact point grazing its surface (gap and force both ~0) makes the smoothed complementarity
+                # row all curvature: the Newton increments stop contracting while the residual still falls
+                ok = bool(np.linalg.norm(R_try) / scale_try < (1.0 - alpha / 4.0) * rel)
             if ok or not fresh:
                 break
             alpha *= 0.5
