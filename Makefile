@@ -20,7 +20,7 @@ test: $(STAMP)
 	@command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1 || \
 	  { [ "$$(id -u)" = 0 ] && apt-get install -y -q chromium >/dev/null 2>&1; } || \
 	  echo "make test: no chromium and it could not be installed: the report's browser test will skip (with this reason)"
-	$(BIN)/python -m pytest -q -rs
+	$(BIN)/python -m pytest -q -rs -n 2 --dist loadgroup --durations 25
 
 paper: $(STAMP)
 	$(BIN)/python scripts/reproduce_paper.py

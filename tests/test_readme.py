@@ -1,9 +1,16 @@
-"""The README's commands run as written (only the output directories moved to a temporary folder)."""
+"""The README's commands run as written (only the output directories moved to a temporary folder).
+
+The commands are split into chains: a command that reads what an earlier one wrote (``compare results/fw
+results/fb``) runs after it in the same test, and independent chains are separate tests, so that ``make
+test``'s workers share them out. The Dask recipe's scheduler and workers (port 8786, as written) are
+started once per test process, for the chains that name the scheduler; those chains form one xdist group.
+"""
 
 import re
 import shlex
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from conftest import REPO
@@ -20,32 +27,85 @@ def readme_commands(prefix: str = ".venv/bin/casadi-ws ") -> list[str]:
     return cmds
 
 
-@pytest.mark.slow
-def test_every_casadi_ws_command_of_the_readme_runs(tmp_path):
+def _paths(cmd: str) -> tuple[set, set]:
+    """(results paths the command writes, results paths it reads)."""
+    args = shlex.split(cmd)
+    writes = {args[i + 1] for i, a in enumerate(args[:-1]) if a in ("--out", "--plot")}
+    reads = {a for a in args if a.startswith("results/") and a not in writes}
+    return writes, reads
+
+
+def command_chains() -> list[list[str]]:
+    """The README's commands grouped so that a command runs after those whose results it reads."""
     cmds = readme_commands()
-    assert len(cmds) >= 7  # equilibrium, solve forward, solve fb, compare, reach x2, follow
-    # the Dask recipe's scheduler and workers, started as written (in the background, as the '&' says)
+    chain = list(range(len(cmds)))  # union-find over command indices
+
+    def root(i):
+        while chain[i] != i:
+            i = chain[i]
+        return i
+
+    written = {}
+    for i, cmd in enumerate(cmds):
+        writes, reads = _paths(cmd)
+        for path in reads:
+            for w, j in written.items():
+                if path == w or path.startswith(w + "/"):
+                    chain[root(i)] = root(j)
+        for w in writes:
+            written[w] = i
+    groups: dict[int, list[str]] = {}
+    for i, cmd in enumerate(cmds):
+        groups.setdefault(root(i), []).append(cmd)
+    return list(groups.values())
+
+
+def _chain_id(chain: list[str]) -> str:
+    args = shlex.split(chain[0])
+    return f"{args[1]}-{args[2].rsplit('/', 1)[-1]}-{'-'.join(a.lstrip('-') for a in args[3:5])}"
+
+
+def _needs_scheduler(chain: list[str]) -> bool:
+    return any("--scheduler" in c for c in chain)
+
+
+@pytest.fixture(scope="module")
+def dask_daemons():
+    """The Dask recipe's scheduler and workers, started as written (in the background, as the '&' says)."""
     daemons = [subprocess.Popen(shlex.split(c.rstrip("&").strip()), cwd=REPO, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL) for c in readme_commands(".venv/bin/dask ")]
     assert len(daemons) == 2
-    outputs = {}
-    try:
-        for cmd in cmds:
-            args = shlex.split(cmd.replace("results/", f"{tmp_path}/results/"))[1:]
-            r = subprocess.run([sys.executable, "-m", "casadi_ws.cli", *args], capture_output=True, text=True,
-                               cwd=REPO)
-            assert r.returncode == 0, f"{cmd}\n{r.stderr[-2000:]}"
-            outputs[cmd] = (args, r.stdout)
-    finally:
-        for d in daemons:
-            d.terminate()
-        for d in daemons:
-            d.wait(timeout=30)
-    assert (tmp_path / "results" / "fb-dask" / "cells.vtu").is_file()
-    assert (tmp_path / "results" / "fb" / "cells.vtu").is_file()
-    assert (tmp_path / "results" / "compare.png").is_file()
-    assert (tmp_path / "results" / "path" / "follow.csv").is_file()
+    yield
+    for d in daemons:
+        d.terminate()
+    for d in daemons:
+        d.wait(timeout=30)
 
+
+def test_the_readme_shows_every_kind_of_command():
+    kinds = {shlex.split(c)[1] for c in readme_commands()}
+    assert {"equilibrium", "solve", "compare", "report", "boundary", "reach", "follow", "study",
+            "import-sofa"} <= kinds
+    assert sum(len(c) for c in command_chains()) == len(readme_commands())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("chain", [pytest.param(c, id=_chain_id(c),
+                                                marks=[pytest.mark.xdist_group("dask")] if _needs_scheduler(c) else [])
+                                   for c in command_chains()])
+def test_every_casadi_ws_command_of_the_readme_runs(chain, tmp_path, request):
+    if _needs_scheduler(chain):
+        request.getfixturevalue("dask_daemons")
+    outputs = {}
+    for cmd in chain:
+        args = shlex.split(cmd.replace("results/", f"{tmp_path}/results/"))[1:]
+        r = subprocess.run([sys.executable, "-m", "casadi_ws.cli", *args], capture_output=True, text=True,
+                           cwd=REPO)
+        assert r.returncode == 0, f"{cmd}\n{r.stderr[-2000:]}"
+        outputs[cmd] = (args, r.stdout)
+        for i, a in enumerate(args[:-1]):  # what --out / --plot names is there
+            if a in ("--out", "--plot"):
+                assert Path(args[i + 1]).exists(), f"{cmd}: wrote no {args[i + 1]}"
     _check_outputs(outputs, tmp_path)
 
 
@@ -70,7 +130,6 @@ def _check_outputs(outputs, tmp_path):
         assert eq.converged
         return eq.tip
 
-    checked = set()
     for cmd, (args, stdout) in outputs.items():
         kind, path = args[0], args[1]
         if kind == "equilibrium":
@@ -94,7 +153,3 @@ def _check_outputs(outputs, tmp_path):
             if "cells" in res.arrays:  # every reported tip lies in its reported cell
                 step, origin = float(res.arrays["cell_step"]), res.arrays["grid_origin"]
                 np.testing.assert_array_equal(np.round((res.points - origin) / step), res.arrays["cells"])
-        else:
-            continue
-        checked.add(kind)
-    assert checked == {"equilibrium", "reach", "follow", "solve"}
