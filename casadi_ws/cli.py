@@ -253,6 +253,11 @@ def cmd_import_sofa(args) -> int:
     if scene.suffix.lower() not in (".py", ".pyscn", ".scn"):
         raise UsageError(f"{scene}: expected a SOFA scene (.py, .pyscn or .scn), got {scene.suffix or 'no extension'}")
     out = Path(args.out) if args.out else scene.with_suffix(".yaml")
+    if not scene.is_file():
+        raise UsageError(f"{scene}: scene file not found")
+    # the mesh paths are written relative to the output's folder, and checked from there: it must exist
+    # (a path through a missing folder, results/../problems, does not resolve)
+    out.parent.mkdir(parents=True, exist_ok=True)
     tr = import_scene(scene, out, args.units)
     print(f"wrote {out} ({tr.units} -> SI)")
     for line in tr.notes:
