@@ -59,8 +59,8 @@ def test_compiled_and_interpreted_kernels_agree(model, rng):
         + rng.normal(size=(7, 4, 3)) * 1e-3
     V0, G = rest_geometry(X)  # (7, 1) volumes: one quadrature point
     X = (X - X[:, :1]).reshape(7, 12)
-    args = [rng.normal(size=X.shape) * 1e-4, X, G.reshape(7, 12),
-            np.column_stack([V0, np.full(7, 2e5), np.full(7, 5e5)])]
+    params = Material(model, 5e5, 0.3).parameters  # the law's parameter vector, of its own length
+    args = [rng.normal(size=X.shape) * 1e-4, X, G.reshape(7, 12), np.column_stack([V0, np.tile(params, (7, 1))])]
     a, = ElementBatch(f, "c")(*args)
     b, = ElementBatch(f, "casadi")(*args)
     np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max())

@@ -56,6 +56,24 @@ ROUNDOFF x the elements' force scale counts as zero (measured at rest: ~3 eps fo
 
 
 @dataclass
+class _ElementGroup:
+    """The elements of one law: their dofs and rest inputs, and the law's kernels over them."""
+
+    model: str
+    index: np.ndarray | None
+    """The elements' indices in the mesh; None: all of them."""
+    edofs: np.ndarray
+    Xe: np.ndarray
+    Ge: np.ndarray
+    Pe: np.ndarray
+    """Quadrature weights, then the material parameters, per element."""
+    functions: dict
+    force: ElementBatch
+    stiff: ElementBatch
+    hv: ElementBatch | None = None
+
+
+@dataclass
 class _ActuatorData:
     actuator: object
     W: sp.csr_matrix
@@ -100,26 +118,35 @@ class StaticModel:
         """The contact rows (and unknowns) among the free dofs."""
         self.X = np.concatenate([mesh.nodes.reshape(-1), np.zeros(self.n_extra)])
 
-        # --- elements
+        # --- elements: grouped by law (a region may have its own), one compiled kernel per law
         mat = problem.material
         Xe = mesh.nodes[mesh.tets]
         w, G = element.rest_geometry(Xe)
-        # Lame parameters and density per element: the body's material, overridden in its regions
-        mu, lam = np.full(mesh.n_tets, mat.lame[0]), np.full(mesh.n_tets, mat.lame[1])
-        rho = np.full(mesh.n_tets, mat.density)
+        law = np.zeros(mesh.n_tets, dtype=np.int64)  # index into materials: the body's, then the regions'
+        materials = [mat]
         for tets, region in problem.regions:
-            mu[tets], lam[tets] = region.lame
-            rho[tets] = region.density
+            law[tets] = len(materials)
+            materials.append(region)
+        rho = np.array([m.density for m in materials])[law]
         nd = element.n_dof
-        self._Xe = (Xe - Xe[:, :1]).reshape(-1, nd)  # element-local: see materials' note on round-off
-        self._Ge = G.reshape(G.shape[0], -1)
-        self._Pe = np.column_stack([w, mu, lam])
-        funs = element_functions(mat.model, element, hessian=False)
-        self.element_functions = funs
-        self._force = ElementBatch(funs["force"], backend)
-        self._stiff = ElementBatch(funs["stiffness"], backend)
-        self.backend = self._force.backend
         self._edofs = (3 * mesh.tets[:, :, None] + np.arange(3)[None, None, :]).reshape(-1, nd)
+        Xl = (Xe - Xe[:, :1]).reshape(-1, nd)  # element-local: see materials' note on round-off
+        Gl = G.reshape(G.shape[0], -1)
+        models = list(dict.fromkeys(m.kernel for m in materials))
+        self.element_groups: list[_ElementGroup] = []
+        """The elements of each law, with their inputs and compiled kernels (one group if the body has one
+        law, as usual)."""
+        for model in models:
+            ks = [k for k, m in enumerate(materials) if m.kernel == model]
+            idx = np.flatnonzero(np.isin(law, ks))
+            params = np.array([materials[k].parameters for k in ks])[np.searchsorted(ks, law[idx])]
+            funs = element_functions(model, element, hessian=False)
+            self.element_groups.append(_ElementGroup(
+                model, None if len(models) == 1 else idx, self._edofs[idx], Xl[idx], Gl[idx],
+                np.column_stack([w[idx], params]), funs, ElementBatch(funs["force"], backend),
+                ElementBatch(funs["stiffness"], backend)))
+        self.element_functions = self.element_groups[0].functions
+        self.backend = self.element_groups[0].force.backend
 
         # --- loads: consistent gravity loads and point loads on embedded points
         F = np.zeros(self.n_dof)
@@ -317,14 +344,32 @@ class StaticModel:
         self._k_indptr = np.concatenate([[0], np.cumsum(ccount)]).astype(np.int32)
         self._k_nnz = ukey.size
 
-    def hessian_vector_function(self):
-        """The element function of d(K_e^T lam_e)/du_e (for the NLPs' Hessians), built on first use."""
-        if "hessian_vector" not in self.element_functions:
-            self.element_functions.update(element_functions(self.problem.material.model, self.element))
-        return self.element_functions["hessian_vector"]
+    def hessian_vector_function(self, group: int = 0):
+        """The element function of d(K_e^T lam_e)/du_e (for the NLPs' Hessians) of the elements of a law,
+        built on first use."""
+        g = self.element_groups[group]
+        if "hessian_vector" not in g.functions:
+            g.functions.update(element_functions(g.model, self.element))
+        return g.functions["hessian_vector"]
 
-    def _element_inputs(self, q: np.ndarray):
-        return q[self._edofs], self._Xe, self._Ge, self._Pe
+    def _element_values(self, q: np.ndarray, kernels: str, *extra) -> list[np.ndarray]:
+        """The outputs of the element kernels ``kernels`` (``force``, ``stiff``, ``hv``) of every law, in
+        the mesh's element order."""
+        groups = self.element_groups
+        if len(groups) == 1:
+            g = groups[0]
+            return [getattr(g, k)(q[g.edofs], g.Xe, g.Ge, g.Pe, *(e[g.edofs] for e in extra))[0]
+                    for k in kernels.split()]
+        outs = []
+        for k in kernels.split():
+            out = None
+            for g in groups:
+                v, = getattr(g, k)(q[g.edofs], g.Xe, g.Ge, g.Pe, *(e[g.edofs] for e in extra))
+                if out is None:
+                    out = np.empty((self.mesh.n_tets, v.shape[1]))
+                out[g.index] = v
+            outs.append(out)
+        return outs
 
     def positions(self, q: np.ndarray) -> np.ndarray:
         """Current node positions (n, 3)."""
@@ -345,12 +390,12 @@ class StaticModel:
 
     def internal_force(self, q: np.ndarray) -> np.ndarray:
         """f_int(q) on all dofs (3n,)."""
-        fe, = self._force(*self._element_inputs(q))
+        fe, = self._element_values(q, "force")
         return np.bincount(self._edofs.ravel(), weights=fe.ravel(), minlength=self.n_dof)
 
     def element_stiffness(self, q: np.ndarray) -> sp.csc_matrix:
         """df_int/dq on the free dofs."""
-        ke, = self._stiff(*self._element_inputs(q))
+        ke, = self._element_values(q, "stiff")
         return self.assemble(ke)
 
     def assemble(self, ke: np.ndarray, actuator_weights: np.ndarray | None = None, border=None,
@@ -386,7 +431,7 @@ class StaticModel:
         from scipy.sparse.linalg import splu
 
         q0 = np.zeros(self.n_dof)
-        ke, = self._stiff(*self._element_inputs(q0))
+        ke, = self._element_values(q0, "stiff")
         n = self.n_free_mech
         K0 = self.assemble(ke)[:n, :n].tocsc()
         H = self.actuation_rows(q0)[:, :n]
@@ -497,7 +542,7 @@ class StaticModel:
         """
         Q, dQ, _ = self.actuator_terms(q)
         ext = (dQ.T @ (-self.sign * self.intensities(q, u)) - load * self.F)[self.free]
-        fe, = self._force(*self._element_inputs(q))
+        fe, = self._element_values(q, "force")
         R = np.bincount(self._edofs.ravel(), weights=fe.ravel(), minlength=self.n_dof)[self.free] + ext
         if self.n_lam:
             R[self.n_free_mech:self.n_free_mech + self.n_lam] = self._prescribed_rows(q, u, Q)[0]
@@ -522,8 +567,7 @@ class StaticModel:
         coef = -self.sign * t  # R holds -sign_a t_a dQ_a/dq
         weights = (coef[self._act_of_entry] * self._act_h_weight * h[self._act_h_index]
                    if self._act else np.zeros(0))
-        inputs = self._element_inputs(q)
-        fe, ke = self._force(*inputs)[0], self._stiff(*inputs)[0]
+        fe, ke = self._element_values(q, "force stiff")
         R = (np.bincount(self._edofs.ravel(), weights=fe.ravel(), minlength=self.n_dof) + dQ.T @ coef
              - load * self.F)[self.free]
         dRdu = (dQ * -self.sign[:, None])[:, self.free].T
@@ -619,14 +663,15 @@ class StaticModel:
         """Second derivatives of lam . R (lam on the free dofs): (d(K^T lam)/dq on the free dofs, sparse;
         d(K^T lam)/du = d(dR/du^T lam)/dq, dense (n_free, n_u)). K^T lam, not K lam: the corotational
         tangent is not exactly symmetric, and this is what reverse-mode AD differentiates."""
-        if "_hv" not in self.__dict__:
-            # "auto", not "c": a kernel too large to compile (kernels.MAX_COMPILED_CODE) runs in CasADi's VM
-            # even when the others are compiled
-            self._hv = ElementBatch(self.hessian_vector_function(), "casadi" if self.backend == "casadi" else "auto")
+        for k, g in enumerate(self.element_groups):
+            if g.hv is None:
+                # "auto", not "c": a kernel too large to compile (kernels.MAX_COMPILED_CODE) runs in CasADi's
+                # VM even when the others are compiled
+                g.hv = ElementBatch(self.hessian_vector_function(k), "casadi" if self.backend == "casadi" else "auto")
         u = np.asarray(u, dtype=float)
         lam_full = np.zeros(self.n_dof)
         lam_full[self.free] = lam
-        he, = self._hv(*self._element_inputs(q), lam_full[self._edofs])
+        he, = self._element_values(q, "hv", lam_full)
         Hact, cols = self.actuator_third(q, lam_full, self.intensities(q, u))
         Hqu = np.column_stack(cols) if cols else np.zeros((self.n_free, 0))
         Hqq = self.assemble(he) + Hact

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import difflib
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +18,8 @@ import numpy as np
 
 from ..actuation.base import Actuator
 from ..actuation.cable import Cable, trunk_cable
-from ..fem.materials import MATERIAL_MODELS, Material
+from ..fem.materials import HYPERELASTIC_CONSTANTS, MATERIAL_MODELS, Material, hyperelastic
+from ..fem.silicones import SILICONES
 from ..fem.mesh import (Mesh, MeshError, box_mesh, closest_point_in_tet, embed, load_mesh, quadratic,
                         transform_points, trunk_mesh)
 from ..solvers.admissible import AdmissibilitySettings
@@ -82,8 +83,8 @@ class Problem:
     name: str = "problem"
     source: str = "<python>"
     regions: list[tuple[np.ndarray, Material]] = field(default_factory=list)
-    """Parts of the body of another material: (tetrahedron indices, Material) pairs, later ones win; the
-    material model (law) is the body's, the constants are the region's (a strain-limiting layer)."""
+    """Parts of the body of another material: (tetrahedron indices, Material) pairs, later ones win. A
+    region may have a law of its own (a strain-limiting layer of a stiffer silicone)."""
     task: object = None
     """A region the robot should reach (:class:`casadi_ws.workspace.measures.Task`), or None."""
     partial_fixed: list[tuple[np.ndarray, tuple[int, ...]]] = field(default_factory=list)
@@ -152,8 +153,10 @@ _MESH_GEN = {"generate", "length", "radius_base", "radius_tip", "resolution", "s
              "order"}
 _MESH_FILE = {"file", "scale", "units", "order", "transform"}
 _TRANSFORM = {"rotation", "translation", "scale"}
-_MATERIAL = {"model", "young_modulus", "poisson_ratio", "density", "total_mass", "max_stretch"}
-_REGION = {"box", "young_modulus", "poisson_ratio", "density", "max_stretch"}
+_CONSTANTS = {"c10", "c01", "c20", "c30", "mu", "alpha"}
+_MATERIAL = {"name", "model", "young_modulus", "poisson_ratio", "density", "total_mass", "max_stretch",
+             "bulk_modulus", "d1", *_CONSTANTS}
+_REGION = (_MATERIAL - {"total_mass"}) | {"box"}
 _CABLE = {"name", "points", "indices", "pull_point", "trunk_routing", "u_min", "u_max", "stroke_max", "control"}
 _CAVITY = {"name", "surface", "enclosing", "u_min", "u_max", "scale", "transform", "volume_max", "volume_max_ratio",
            "embed_tolerance", "control"}
@@ -606,11 +609,12 @@ def _read_end_effector(r: _Reader, ee, mesh: Mesh) -> np.ndarray:
 
 
 def _read_regions(r: _Reader, lst, mesh: Mesh, material: Material) -> list:
-    """``material_regions``: (tetrahedra whose centroid lies in the box, Material) pairs."""
+    """``material_regions``: (tetrahedra whose centroid lies in the box, Material) pairs. A region keeps the
+    body's law and constants except those it gives; with ``model`` or ``name`` it has a law of its own."""
     regions = []
     lst = lst or []
     if not isinstance(lst, list):
-        r.fail("material_regions", "expected a list of {box, young_modulus, poisson_ratio, density}")
+        r.fail("material_regions", "expected a list of {box, and the material keys that differ from the body's}")
     centroids = mesh.nodes[mesh.corners].mean(axis=1)
     for i, g in enumerate(lst):
         key = f"material_regions[{i}]"
@@ -619,13 +623,78 @@ def _read_regions(r: _Reader, lst, mesh: Mesh, material: Material) -> list:
         tets = np.flatnonzero(np.all((centroids >= lo) & (centroids <= hi), axis=1))
         if tets.size == 0:
             r.fail(f"{key}.box", "holds the centroid of no tetrahedron")
-        regions.append((tets, Material(material.model,
-                                       r.number(g, "young_modulus", key, material.young_modulus, lo=0.0, lo_open=True),
-                                       r.number(g, "poisson_ratio", key, material.poisson_ratio, lo=-1.0, hi=0.5,
-                                                lo_open=True, hi_open=True),
-                                       r.number(g, "density", key, material.density, lo=0.0),
-                                       _max_stretch(r, g, key, material.max_stretch))))
+        own = "model" in g or "name" in g
+        regions.append((tets, _read_material(r, g, key, None if own else material)))
     return regions
+
+
+def _read_material(r: _Reader, m: dict, key: str, base: Material | None = None) -> Material:
+    """A ``material`` mapping (the body's, or a region's over the body's ``base``): a law with E and nu, or
+    a strain-energy law with its constants, optionally starting from a named silicone."""
+    entry = {}
+    if "name" in m:
+        name = m["name"]
+        if name not in SILICONES:
+            close = difflib.get_close_matches(str(name), SILICONES, n=1)
+            r.fail(f"{key}.name", f"unknown material {name!r}; expected one of {', '.join(SILICONES)}"
+                   + (f" (did you mean '{close[0]}'?)" if close else ""))
+        entry = SILICONES[name]
+        if "model" in m and m["model"] != entry["model"]:
+            r.fail(f"{key}.model", f"{name} is a {entry['model']} fit; give its name or another model, not both")
+    model = m.get("model", entry.get("model", base.model if base is not None else "corotational"))
+    if model not in MATERIAL_MODELS:
+        close = difflib.get_close_matches(str(model), MATERIAL_MODELS, n=1)
+        r.fail(f"{key}.model", f"expected one of {', '.join(MATERIAL_MODELS)}, got {model!r}"
+               + (f" (did you mean '{close[0]}'?)" if close else ""))
+    inherit = base if base is not None and base.model == model else None
+    density = r.number(m, "density", key, entry.get("density", inherit.density if inherit else 1000.0), lo=0.0)
+    max_stretch = _max_stretch(r, m, key, inherit.max_stretch if inherit else None)
+    names = HYPERELASTIC_CONSTANTS.get(model)
+    if names is None:
+        for k in sorted((_CONSTANTS | {"bulk_modulus", "d1"}) & set(m)):
+            r.fail(f"{key}.{k}", f"is a constant of the strain-energy laws ({', '.join(HYPERELASTIC_CONSTANTS)}); "
+                                 f"{model} takes young_modulus and poisson_ratio")
+        return Material(model,
+                        r.number(m, "young_modulus", key, inherit.young_modulus if inherit else None, lo=0.0,
+                                 lo_open=True),
+                        r.number(m, "poisson_ratio", key, inherit.poisson_ratio if inherit else None, lo=-1.0,
+                                 hi=0.5, lo_open=True, hi_open=True),
+                        density, max_stretch)
+    if "young_modulus" in m:
+        r.fail(f"{key}.young_modulus", f"{model} is given by its constants ({', '.join(names)}, Pa) and "
+                                       f"bulk_modulus, d1 or poisson_ratio, not by young_modulus")
+    for k in sorted((_CONSTANTS - set(names)) & set(m)):
+        r.fail(f"{key}.{k}", f"is not a constant of {model} (its constants: {', '.join(names)})")
+    constants = dict(inherit.constants) if inherit else {k: entry.get(k, 0.0) for k in names if k in entry}
+    for k in names:
+        if k in m:
+            constants[k] = _numbers(r, m[k], f"{key}.{k}") if model == "ogden" else r.number(m, k, key)
+    if not any(k in m for k in names) and not entry and not inherit:
+        r.fail(key, f"{model}: give its constants {', '.join(names)} (Pa), or a named material (name: ...)")
+    given = [k for k in ("bulk_modulus", "d1", "poisson_ratio") if k in m]
+    if len(given) > 1:
+        r.fail(f"{key}.{given[1]}", f"give one of bulk_modulus (Pa), d1 (1/Pa) or poisson_ratio, not {' and '.join(given)}")
+    bulk = constants.pop("bulk_modulus", None)
+    nu = None
+    if given == ["bulk_modulus"]:
+        bulk = r.number(m, "bulk_modulus", key, lo=0.0, lo_open=True)
+    elif given == ["d1"]:
+        bulk = 2.0 / r.number(m, "d1", key, lo=0.0, lo_open=True)
+    elif given == ["poisson_ratio"]:
+        bulk, nu = None, r.number(m, "poisson_ratio", key, lo=-1.0, hi=0.5, lo_open=True, hi_open=True)
+    try:
+        return hyperelastic(model, bulk, nu, density, max_stretch, **constants)
+    except ValueError as exc:
+        r.fail(key, str(exc))
+
+
+def _numbers(r: _Reader, v, path: str) -> tuple:
+    """A list of finite numbers (a single number: a list of one)."""
+    v = [v] if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+    if not isinstance(v, list) or not v or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                  and math.isfinite(x) for x in v):
+        r.fail(path, f"expected a list of finite numbers, got {v!r}")
+    return tuple(float(x) for x in v)
 
 
 def _max_stretch(r: _Reader, d: dict, key: str, default):
@@ -807,21 +876,12 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     mesh, _ = _read_mesh(r, d["mesh"], base)
 
     m = r.mapping(d["material"], "material", _MATERIAL)
-    model = m.get("model", "corotational")
-    if model not in MATERIAL_MODELS:
-        close = difflib.get_close_matches(str(model), MATERIAL_MODELS, n=1)
-        r.fail("material.model", f"expected one of {', '.join(MATERIAL_MODELS)}, got {model!r}"
-               + (f" (did you mean '{close[0]}'?)" if close else ""))
     if "density" in m and "total_mass" in m:
         r.fail("material.total_mass", "give density (kg/m^3) or total_mass (kg), not both")
-    density = r.number(m, "density", "material", 1000.0, lo=0.0)
+    material = _read_material(r, m, "material")
     if "total_mass" in m:
         # SOFA's UniformMass totalMass: spread here by volume (a consistent mass), not equally per node
-        density = r.number(m, "total_mass", "material", lo=0.0) / float(mesh.volumes().sum())
-    material = Material(model,
-                        r.number(m, "young_modulus", "material", lo=0.0, lo_open=True),
-                        r.number(m, "poisson_ratio", "material", lo=-1.0, hi=0.5, lo_open=True, hi_open=True),
-                        density, _max_stretch(r, m, "material", None))
+        material = replace(material, density=r.number(m, "total_mass", "material", lo=0.0) / float(mesh.volumes().sum()))
     regions = _read_regions(r, d.get("material_regions"), mesh, material)
     gravity = r.vector(d["gravity"], "gravity") if d.get("gravity") is not None else np.zeros(3)
     obstacles = _read_obstacles(r, d.get("obstacles"), mesh, base)

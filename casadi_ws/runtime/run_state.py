@@ -32,9 +32,9 @@ class CheckpointError(ValueError):
 def fingerprint(method: str, model, settings: dict) -> str:
     """Hash of what determines the answer: the method, the model's geometry and loads, the settings."""
     h = hashlib.sha256(method.encode())
-    # _Pe: quadrature weights and Lame parameters per element (material regions)
-    for a in (model.X, model.mesh.tets, model.free, model.F, model.u_min, model.u_max, model.p0, model._Pe,
-              model.prescribed):
+    # Pe: quadrature weights and material parameters per element, per law (material regions)
+    for a in (model.X, model.mesh.tets, model.free, model.F, model.u_min, model.u_max, model.p0,
+              *(g.Pe for g in model.element_groups), model.prescribed):
         h.update(np.ascontiguousarray(a).tobytes())
     pb = model.problem
     h.update(json.dumps([asdict(pb.material), asdict(pb.solver), [a.describe() for a in model.actuators],
