@@ -56,6 +56,7 @@ HYPERELASTIC_CONSTANTS = {"mooney_rivlin": ("c10", "c01"), "yeoh": ("c10", "c20"
 """The constants of each strain-energy law, in the order of the kernel's parameters; K follows them. Ogden's
 are lists of N terms: mu_i (Pa) and alpha_i (dimensionless)."""
 MAX_OGDEN_TERMS = 6
+FORMULATIONS = ("displacement", "mixed")
 MATERIAL_MODELS = ("linear", "corotational", "neohookean", *HYPERELASTIC_CONSTANTS)
 
 
@@ -79,6 +80,10 @@ class Material:
     """A strain-energy law's constants, (name, value) pairs in Pa: those of :data:`HYPERELASTIC_CONSTANTS`
     and ``bulk_modulus``. Empty for the laws given by E and nu; a strain-energy law given E and nu only
     takes its neo-Hookean member (C10 = mu/2, the others 0; Ogden: one term, alpha = 2)."""
+    formulation: str = "displacement"
+    """How a strain-energy law's volumetric term is integrated: ``displacement`` (at every quadrature point)
+    or ``mixed`` (a constant pressure per element, condensed on the element: the mean dilatation, which does
+    not lock on 10-node tetrahedra as nu -> 0.5). The laws given by E and nu take ``displacement``."""
 
     def __post_init__(self):
         if self.model in HYPERELASTIC_CONSTANTS and not self.constants:
@@ -106,9 +111,8 @@ class Material:
     @property
     def kernel(self) -> str:
         """The name of its element kernels: the law, with Ogden's number of terms (``ogden3``)."""
-        if self.model == "ogden":
-            return f"ogden{len(dict(self.constants)['mu'])}"
-        return self.model
+        name = f"ogden{len(dict(self.constants)['mu'])}" if self.model == "ogden" else self.model
+        return name + "_mixed" if self.formulation == "mixed" and self.model in HYPERELASTIC_CONSTANTS else name
 
     @property
     def shear_modulus(self) -> float:
@@ -128,7 +132,8 @@ def initial_shear_modulus(model: str, constants: dict) -> float:
 
 
 def hyperelastic(model: str, bulk_modulus: float | None = None, poisson_ratio: float | None = None,
-                 density: float = 1000.0, max_stretch: float | None = None, **constants: float) -> Material:
+                 density: float = 1000.0, max_stretch: float | None = None, formulation: str = "displacement",
+                 **constants: float) -> Material:
     """A :class:`Material` of a strain-energy law from its constants (Pa; missing ones are 0) and its
     compressibility: ``bulk_modulus`` K (Pa), or the small-strain ``poisson_ratio`` (K = 2 mu0 (1 + nu) /
     (3 (1 - 2 nu))); neither: nu = 0.45, what the elements here take without locking."""
@@ -159,7 +164,9 @@ def hyperelastic(model: str, bulk_modulus: float | None = None, poisson_ratio: f
     K = float(bulk_modulus)
     E = 9.0 * K * mu0 / (3.0 * K + mu0)
     nu = (3.0 * K - 2.0 * mu0) / (2.0 * (3.0 * K + mu0))
-    return Material(model, E, nu, density, max_stretch, tuple(c.items()) + (("bulk_modulus", K),))
+    if formulation not in FORMULATIONS:
+        raise ValueError(f"formulation: expected one of {', '.join(FORMULATIONS)}, got {formulation!r}")
+    return Material(model, E, nu, density, max_stretch, tuple(c.items()) + (("bulk_modulus", K),), formulation)
 
 
 def lame(E: float, nu: float) -> tuple[float, float]:
@@ -229,12 +236,12 @@ def _isochoric_invariants(F):
 
 def _mooney_rivlin_energy(F, p):
     I1b, I2b, J = _isochoric_invariants(F)
-    return p[0] * (I1b - 3) + p[1] * (I2b - 3) + 0.5 * p[2] * (J - 1) ** 2
+    return p[0] * (I1b - 3) + p[1] * (I2b - 3)
 
 
 def _yeoh_energy(F, p):
     I1b, _, J = _isochoric_invariants(F)
-    return p[0] * (I1b - 3) + p[1] * (I1b - 3) ** 2 + p[2] * (I1b - 3) ** 3 + 0.5 * p[3] * (J - 1) ** 2
+    return p[0] * (I1b - 3) + p[1] * (I1b - 3) ** 2 + p[2] * (I1b - 3) ** 3
 
 
 _EIG_A, _EIG_D = 1e-12, 1e-8
@@ -264,8 +271,8 @@ def _isochoric_eigenvalues(F):
 
 def _ogden_energy(F, p):
     n = (p.numel() - 1) // 2
-    c, J = _isochoric_eigenvalues(F)
-    W = 0.5 * p[2 * n] * (J - 1) ** 2
+    c, _ = _isochoric_eigenvalues(F)
+    W = 0
     for i in range(n):
         mu, alpha = p[i], p[n + i]
         W += 2 * mu / alpha**2 * (sum(ck ** (alpha / 2) for ck in c) - 3)
@@ -275,13 +282,16 @@ def _ogden_energy(F, p):
 _ENERGIES = {"mooney_rivlin": _mooney_rivlin_energy, "yeoh": _yeoh_energy, "ogden": _ogden_energy}
 
 
-def _law(kernel: str) -> tuple[str, int]:
-    """(law, number of material parameters) of a kernel name (``ogden3``: Ogden with 3 terms)."""
+def _law(kernel: str) -> tuple[str, int, bool]:
+    """(law, number of material parameters, mixed) of a kernel name (``ogden3``: Ogden with 3 terms;
+    ``yeoh_mixed``: Yeoh with a constant pressure per element)."""
+    mixed = kernel.endswith("_mixed")
+    kernel = kernel.removesuffix("_mixed")
     if kernel.startswith("ogden") and kernel[5:].isdigit():
-        return "ogden", 2 * int(kernel[5:]) + 1
+        return "ogden", 2 * int(kernel[5:]) + 1, mixed
     if kernel in HYPERELASTIC_CONSTANTS:
-        return kernel, len(HYPERELASTIC_CONSTANTS[kernel]) + 1
-    return kernel, 2
+        return kernel, len(HYPERELASTIC_CONSTANTS[kernel]) + 1, mixed
+    return kernel, 2, mixed
 
 
 def n_parameters(kernel: str) -> int:
@@ -289,13 +299,28 @@ def n_parameters(kernel: str) -> int:
     return _law(kernel)[1]
 
 
-def _energy_stress(kernel: str):
-    """P(F, p) = dW/dF of a strain-energy law, as a function of SX arguments (inlined when called)."""
-    law, npar = _law(kernel)
+def _energy_stress(kernel: str, volumetric: bool = True):
+    """P(F, p) = dW/dF of a strain-energy law, as a function of SX arguments (inlined when called): the
+    isochoric part, plus the volumetric one K (J - 1) J F^-T at the point if ``volumetric``."""
+    law, npar, _ = _law(kernel)
     Fv, p = ca.SX.sym("F", 3, 3), ca.SX.sym("p", npar)
     W = _ENERGIES[law](Fv, p)
-    P = ca.Function(f"{kernel}_stress", [Fv, p], [ca.reshape(ca.gradient(W, ca.vec(Fv)), 3, 3)])
+    if volumetric:
+        W += 0.5 * p[npar - 1] * (ca.det(Fv) - 1) ** 2
+    P = ca.Function(f"{kernel}_stress{'' if volumetric else '_iso'}", [Fv, p],
+                    [ca.reshape(ca.gradient(W, ca.vec(Fv)), 3, 3)])
     return lambda F, *params: P(F, ca.vertcat(*params))
+
+
+def _mean_dilatation_force(u, Gs, ws, K):
+    """The volumetric forces of K/2 (Jbar - 1)^2 V_e, Jbar = sum_k w_k J_k / V_e the element's mean
+    dilatation: the mixed displacement-pressure element with a constant pressure per element, the pressure
+    p = K (Jbar - 1) condensed on the element. f = sum_k w_k p J_k G_k F_k^-1."""
+    Fs = [ca.SX.eye(3) + ca.mtimes(u.T, G) for G in Gs]
+    Js = [ca.det(F) for F in Fs]
+    V = sum(ws)
+    p = K * (sum(w * J for w, J in zip(ws, Js)) / V - 1)
+    return sum(w * p * J * ca.mtimes(G, ca.inv(F)) for G, w, F, J in zip(Gs, ws, Fs, Js))
 
 
 def _hessian_vector_by_quadrature_point(stress, u, lam_e, Gs, ws, *params):
@@ -327,9 +352,11 @@ def _hessian_vector_by_quadrature_point(stress, u, lam_e, Gs, ws, *params):
 
 def _element_force(model: str, u, X, Gs, ws, *params):
     """Nodal forces (n_nodes x 3) summed over the quadrature points (gradients ``Gs``, weights ``ws``)."""
-    if _law(model)[0] in _ENERGIES:
-        stress = _energy_stress(model)
-        return sum(w * ca.mtimes(G, stress(ca.SX.eye(3) + ca.mtimes(u.T, G), *params).T) for G, w in zip(Gs, ws))
+    law, _, mixed = _law(model)
+    if law in _ENERGIES:
+        stress = _energy_stress(model, volumetric=not mixed)
+        f = sum(w * ca.mtimes(G, stress(ca.SX.eye(3) + ca.mtimes(u.T, G), *params).T) for G, w in zip(Gs, ws))
+        return f + _mean_dilatation_force(u, Gs, ws, params[-1]) if mixed else f
     mu, lam = params
     if model == "linear":
         return sum(_linear_force(u, G, w, mu, lam) for G, w in zip(Gs, ws))
@@ -389,10 +416,14 @@ def element_functions(model: str, element: ElementType = TET4, hessian: bool = T
     }
     if hessian:
         stress = {"corotational": _polar_corotational_stress, "neohookean": _neohookean_stress}.get(model)
-        if _law(model)[0] in _ENERGIES:
-            stress = _energy_stress(model)
+        law, _, mixed = _law(model)
+        if law in _ENERGIES:
+            stress = _energy_stress(model, volumetric=not mixed)
         if stress is not None and nq > 1:  # (a 4-node corotational element turns with its edges, not F)
             Hv = _hessian_vector_by_quadrature_point(stress, x, ca.reshape(lam_e, 3, nn).T, Gs, ws, *params)
+            if mixed:  # the volumetric part couples the points: its own (small) graph, differentiated twice
+                fv = ca.reshape(_mean_dilatation_force(x, Gs, ws, params[-1]).T, nd, 1)
+                Hv += ca.jacobian(ca.mtimes(ca.jacobian(fv, xv).T, lam_e), xv)
         else:
             Hv = ca.jacobian(ca.mtimes(K.T, lam_e), xv)
         out["hessian_vector"] = ca.Function(f"{tag}_hessian_vector", ins + [lam_e],

@@ -215,14 +215,20 @@ class StaticModel:
         """The force scale under which a residual counts as zero. Loads of exactly 0 give q = 0, but the
         internal forces there are round-off, ~eps of the force each element exerts at unit strain
         (E V_e^(2/3), the polar decomposition's included); that round-off must pass the tolerance whatever
-        the law."""
+        the law. Nearly incompressible, the volumetric stress K (J - 1) carries K eps of round-off (J - 1 is
+        computed from det F ~ 1): the modulus is then 0.3 K, which equals E at nu = 0.45, so up to there the
+        scale is E as it always was (at nu = 0.499 Newton stalled at 10x the old floor)."""
         problem, mesh, mat = self.problem, self.mesh, self.problem.material
-        E_e = np.full(mesh.n_tets, mat.young_modulus)
+
+        def modulus(m):
+            return max(m.young_modulus, 0.1 * m.young_modulus / (1 - 2 * m.poisson_ratio))  # 0.3 K = 0.1 E/(1-2nu)
+
+        E_e = np.full(mesh.n_tets, modulus(mat))
         for tets, region in problem.regions:
-            E_e[tets] = region.young_modulus
+            E_e[tets] = modulus(region)
         self.element_force_scale = float(np.linalg.norm(E_e * np.abs(w.sum(axis=1)) ** (2.0 / 3.0)))
         """The norm over elements of the force each exerts at unit strain, E_e V_e^(2/3) (N)."""
-        self.force_floor = max(1e-12 * mat.young_modulus * mesh.characteristic_length() ** 2,
+        self.force_floor = max(1e-12 * modulus(mat) * mesh.characteristic_length() ** 2,
                                ROUNDOFF * self.element_force_scale / problem.solver.tolerance)
 
     # ------------------------------------------------------------------ assembly

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..actuation.base import Actuator
 from ..actuation.cable import Cable, trunk_cable
-from ..fem.materials import HYPERELASTIC_CONSTANTS, MATERIAL_MODELS, Material, hyperelastic
+from ..fem.materials import FORMULATIONS, HYPERELASTIC_CONSTANTS, MATERIAL_MODELS, Material, hyperelastic
 from ..fem.silicones import SILICONES
 from ..fem.mesh import (Mesh, MeshError, box_mesh, closest_point_in_tet, embed, load_mesh, quadratic,
                         transform_points, trunk_mesh)
@@ -155,7 +155,7 @@ _MESH_FILE = {"file", "scale", "units", "order", "transform"}
 _TRANSFORM = {"rotation", "translation", "scale"}
 _CONSTANTS = {"c10", "c01", "c20", "c30", "mu", "alpha"}
 _MATERIAL = {"name", "model", "young_modulus", "poisson_ratio", "density", "total_mass", "max_stretch",
-             "bulk_modulus", "d1", *_CONSTANTS}
+             "bulk_modulus", "d1", "formulation", *_CONSTANTS}
 _REGION = (_MATERIAL - {"total_mass"}) | {"box"}
 _CABLE = {"name", "points", "indices", "pull_point", "trunk_routing", "u_min", "u_max", "stroke_max", "control"}
 _CAVITY = {"name", "surface", "enclosing", "u_min", "u_max", "scale", "transform", "volume_max", "volume_max_ratio",
@@ -624,13 +624,29 @@ def _read_regions(r: _Reader, lst, mesh: Mesh, material: Material) -> list:
         if tets.size == 0:
             r.fail(f"{key}.box", "holds the centroid of no tetrahedron")
         own = "model" in g or "name" in g
-        regions.append((tets, _read_material(r, g, key, None if own else material)))
+        regions.append((tets, _read_material(r, g, key, mesh, None if own else material)))
     return regions
 
 
-def _read_material(r: _Reader, m: dict, key: str, base: Material | None = None) -> Material:
+LOCKING_NU = 0.49
+"""Above this Poisson ratio 4-node tetrahedra are refused: they lock (a thick-walled sphere's volume change
+under pressure is 77 % low at 0.49, 95 % at 0.499; docs/methods.md "Nearly incompressible silicone"), and
+10-node ones take the mixed formulation by default."""
+
+
+def _read_material(r: _Reader, m: dict, key: str, mesh: Mesh, base: Material | None = None) -> Material:
     """A ``material`` mapping (the body's, or a region's over the body's ``base``): a law with E and nu, or
     a strain-energy law with its constants, optionally starting from a named silicone."""
+    mat = _read_law(r, m, key, mesh, base)
+    if mesh.tets.shape[1] == 4 and mat.poisson_ratio > LOCKING_NU:
+        given = next((k for k in ("poisson_ratio", "bulk_modulus", "d1") if k in m), None)
+        r.fail(f"{key}.{given}" if given else key,
+               f"nu = {mat.poisson_ratio:.4g}: 4-node tetrahedra lock above nu = {LOCKING_NU} (a thick sphere's "
+               f"volume change is 95 % low at 0.499); mesh with order: 2, whose mixed formulation does not lock")
+    return mat
+
+
+def _read_law(r: _Reader, m: dict, key: str, mesh: Mesh, base: Material | None) -> Material:
     entry = {}
     if "name" in m:
         name = m["name"]
@@ -651,7 +667,7 @@ def _read_material(r: _Reader, m: dict, key: str, base: Material | None = None) 
     max_stretch = _max_stretch(r, m, key, inherit.max_stretch if inherit else None)
     names = HYPERELASTIC_CONSTANTS.get(model)
     if names is None:
-        for k in sorted((_CONSTANTS | {"bulk_modulus", "d1"}) & set(m)):
+        for k in sorted((_CONSTANTS | {"bulk_modulus", "d1", "formulation"}) & set(m)):
             r.fail(f"{key}.{k}", f"is a constant of the strain-energy laws ({', '.join(HYPERELASTIC_CONSTANTS)}); "
                                  f"{model} takes young_modulus and poisson_ratio")
         return Material(model,
@@ -683,9 +699,16 @@ def _read_material(r: _Reader, m: dict, key: str, base: Material | None = None) 
     elif given == ["poisson_ratio"]:
         bulk, nu = None, r.number(m, "poisson_ratio", key, lo=-1.0, hi=0.5, lo_open=True, hi_open=True)
     try:
-        return hyperelastic(model, bulk, nu, density, max_stretch, **constants)
+        mat = hyperelastic(model, bulk, nu, density, max_stretch, **constants)
     except ValueError as exc:
         r.fail(key, str(exc))
+    if "formulation" in m or inherit:
+        formulation = m.get("formulation", inherit.formulation if inherit else None)
+    else:  # chosen by measurement (docs/methods.md): displacement unless nearly incompressible on 10 nodes
+        formulation = "mixed" if mat.poisson_ratio >= LOCKING_NU and mesh.tets.shape[1] == 10 else "displacement"
+    if formulation not in FORMULATIONS:
+        r.fail(f"{key}.formulation", f"expected one of {', '.join(FORMULATIONS)}, got {formulation!r}")
+    return replace(mat, formulation=formulation)
 
 
 def _numbers(r: _Reader, v, path: str) -> tuple:
@@ -878,7 +901,7 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     m = r.mapping(d["material"], "material", _MATERIAL)
     if "density" in m and "total_mass" in m:
         r.fail("material.total_mass", "give density (kg/m^3) or total_mass (kg), not both")
-    material = _read_material(r, m, "material")
+    material = _read_material(r, m, "material", mesh)
     if "total_mass" in m:
         # SOFA's UniformMass totalMass: spread here by volume (a consistent mass), not equally per node
         material = replace(material, density=r.number(m, "total_mass", "material", lo=0.0) / float(mesh.volumes().sum()))
