@@ -221,7 +221,8 @@ class StaticModel:
         problem, mesh, mat = self.problem, self.mesh, self.problem.material
 
         def modulus(m):
-            return max(m.young_modulus, 0.1 * m.young_modulus / (1 - 2 * m.poisson_ratio))  # 0.3 K = 0.1 E/(1-2nu)
+            E, nu = m.young_modulus, m.poisson_ratio
+            return E if nu <= 0.45 else max(E, 0.1 * E / (1 - 2 * nu))  # 0.3 K = 0.1 E / (1 - 2 nu)
 
         E_e = np.full(mesh.n_tets, modulus(mat))
         for tets, region in problem.regions:
