@@ -132,10 +132,12 @@ def test_small_strain_limit_is_linear_elasticity_with_the_laws_E_and_nu(model):
         assert np.abs(K_law - K_lin).max() < (1e-7 if model == "ogden" else 1e-9) * np.abs(K_lin).max()
 
 
-@pytest.mark.parametrize("model", ["mooney_rivlin", "yeoh", "ogden"])
-def test_tangent_and_hessian_against_finite_differences(model, rng):
-    pb = cantilever(n=1, slender=3, order=2, cable_offset=0.01)
-    pb.material = _material(model, bulk=None, poisson_ratio=0.45)
+@pytest.mark.parametrize("model, order, formulation", [
+    ("mooney_rivlin", 2, "displacement"), ("yeoh", 2, "displacement"), ("ogden", 2, "displacement"),
+    ("mooney_rivlin", 1, "displacement"), ("ogden", 1, "displacement"), ("yeoh", 2, "mixed"), ("ogden", 2, "mixed")])
+def test_tangent_and_hessian_against_finite_differences(model, order, formulation, rng):
+    pb = cantilever(n=1, slender=3, order=order, cable_offset=0.01)
+    pb.material = _material(model, bulk=None, poisson_ratio=0.45, formulation=formulation)
     m = StaticModel(pb)
     u = np.array([3.0])
     q = np.zeros(m.n_dof)
@@ -236,3 +238,51 @@ def test_a_nearly_incompressible_cantilever_with_the_mixed_formulation():
     eq = solve_equilibrium(StaticModel(pb), np.zeros(0))
     assert eq.converged
     assert abs((eq.tip[0] - pb.end_effector[0]) / (P * L**3 / (3 * E * h**4 / 12)) - 1) < 0.02
+
+
+@pytest.mark.slow
+def test_every_method_runs_on_the_strain_energy_laws(tmp_path):
+    """A trunk of a named Yeoh silicone with a ring of an Ogden one near its tip: the problem file, the
+    equilibrium, forward, forward-backward, reach (IPOPT, with the laws' Hessian kernels), the model as a
+    CasADi Function in an Opti problem, and a study's key path setting a constant."""
+    import casadi as ca
+    import yaml
+
+    from casadi_ws import FBSettings, ForwardSettings, forward, forward_backward, problem_from_dict
+    from casadi_ws.control import reach
+    from casadi_ws.fem.functions import residual_function
+    from casadi_ws.study.spec import apply
+
+    from conftest import REPO
+
+    d = yaml.safe_load((REPO / "problems" / "trunk_2cables.yaml").read_text())
+    d["mesh"].update(resolution=0.25)
+    d["material"] = {"name": "dragon-skin-30", "density": 1080}
+    d["material_regions"] = [{"box": [[-1, -1, 0.15], [1, 1, 0.17]], "model": "ogden", "mu": [2e5, 1e3],
+                              "alpha": [1.5, 6.0]}]
+    pb = problem_from_dict(d, "silicone.yaml")
+    m = StaticModel(pb)
+    assert [g.model for g in m.element_groups] == ["yeoh", "ogden2"]
+    u = np.array([2.0, 1.0])  # N: Dragon Skin 30 is 1/60 of the trunk's stiffness
+    eq = solve_equilibrium(m, u)
+    assert eq.converged and eq.tip[0] > 0.005
+    fw = forward(pb, settings=ForwardSettings(n_d=3, progress=False), model=m)
+    assert fw.n_points == 9 and fw.n_failed == 0
+    fb = forward_backward(pb, FBSettings(step=0.02, progress=False), model=m)
+    assert fb.n_points >= 3
+    r = reach(m, eq.tip)
+    assert r.reachable and np.allclose(r.u, u, atol=1e-3)
+
+    R = residual_function(m)  # in an Opti problem: the inputs that hold the tip where eq put it
+    opti = ca.Opti()
+    q, uu = opti.variable(m.n_free), opti.variable(m.n_u)
+    opti.subject_to(R(q, uu) == 0)
+    opti.minimize(ca.sumsqr(uu - u))
+    opti.set_initial(q, eq.q[m.free])
+    opti.set_initial(uu, u)
+    opti.solver("ipopt", {"print_time": False}, {"print_level": 0, "nlp_scaling_method": "none"})
+    sol = opti.solve()
+    assert np.allclose(sol.value(uu), u, atol=1e-6)
+
+    stiffer = problem_from_dict(apply(d, {"material.c10": 2 * 9.6e4}), "silicone.yaml")
+    assert dict(stiffer.material.constants)["c10"] == 2 * 9.6e4

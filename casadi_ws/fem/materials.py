@@ -336,18 +336,52 @@ def _hessian_vector_by_quadrature_point(stress, u, lam_e, Gs, ws, *params):
     ps = [ca.SX.sym(f"p{i}") for i in range(len(params))]
     g = ca.dot(Lv, ca.vec(stress(ca.reshape(Fv, 3, 3), *ps)))
     d2g = ca.Function("d2g", [Fv, Lv, *ps], [ca.hessian(g, Fv)[0]])
-    nn = u.shape[0]
     H = 0
     for G, w in zip(Gs, ws):
         F = ca.SX.eye(3) + ca.mtimes(u.T, G)
-        B = ca.SX.zeros(9, 3 * nn)  # vec(F)[i + 3 J] = sum_b u[b, i] G[b, J]; u_e[3 b + i] = u[b, i]
-        for b in range(nn):
-            for i in range(3):
-                for J in range(3):
-                    B[i + 3 * J, 3 * b + i] = G[b, J]
+        B = _dF_du(G)
         N = d2g(ca.vec(F), ca.vec(ca.mtimes(lam_e.T, G)), *params)
         H = H + w * ca.mtimes(B.T, ca.mtimes(N, B))
     return H
+
+
+def _dF_du(G):
+    """B = dvec(F)/du_e of F = I + u^T G (constant in u): vec(F)[i + 3 J] = sum_b u[b, i] G[b, J] and
+    u_e[3 b + i] = u[b, i]."""
+    nn = G.shape[0]
+    B = ca.SX.zeros(9, 3 * nn)
+    for b in range(nn):
+        for i in range(3):
+            for J in range(3):
+                B[i + 3 * J, 3 * b + i] = G[b, J]
+    return B
+
+
+def _mean_dilatation_hessian_vector(u, lam_e, Gs, ws, K):
+    """d(K_vol^T lam_e)/du_e of the mean-dilatation term, in closed form.
+
+    With a = sum_k w_k J_k, g = da/du, M = d2a/du2 (symmetric) and p = K (a/V - 1): f = p g,
+    K_vol = K/V g g^T + p M, and d(K_vol^T lam)/du = K/V (M (g.lam) + g (M lam)^T + (M lam) g^T)
+    + p d(M lam)/du, the last a sum over the points of B^T (d2(Lam : dJ/dF)/dF2) B (J is cubic in F, so this
+    is constant in F). Differentiating the 30 forces twice instead made a 1.7M-node graph (too large to
+    compile); this one is small."""
+    V = sum(ws)
+    Fv, Lv = ca.SX.sym("F", 9), ca.SX.sym("Lam", 9)
+    J = ca.det(ca.reshape(Fv, 3, 3))
+    dJ = ca.gradient(J, Fv)
+    fun = ca.Function("dJ", [Fv, Lv], [dJ, ca.hessian(J, Fv)[0], ca.hessian(ca.dot(Lv, dJ), Fv)[0]])
+    a, g, M, T = 0, 0, 0, 0
+    for G, w in zip(Gs, ws):
+        F = ca.SX.eye(3) + ca.mtimes(u.T, G)
+        B = _dF_du(G)
+        dJk, HJk, Tk = fun(ca.vec(F), ca.vec(ca.mtimes(lam_e.T, G)))
+        a += w * ca.det(F)
+        g += w * ca.mtimes(B.T, dJk)
+        M += w * ca.mtimes(B.T, ca.mtimes(HJk, B))
+        T += w * ca.mtimes(B.T, ca.mtimes(Tk, B))
+    lam = ca.vec(lam_e.T)  # node-major, as u_e
+    Ml = ca.mtimes(M, lam)
+    return K / V * (M * ca.dot(g, lam) + ca.mtimes(g, Ml.T) + ca.mtimes(Ml, g.T)) + K * (a / V - 1) * T
 
 
 def _element_force(model: str, u, X, Gs, ws, *params):
@@ -419,11 +453,11 @@ def element_functions(model: str, element: ElementType = TET4, hessian: bool = T
         law, _, mixed = _law(model)
         if law in _ENERGIES:
             stress = _energy_stress(model, volumetric=not mixed)
-        if stress is not None and nq > 1:  # (a 4-node corotational element turns with its edges, not F)
+        # (a 4-node corotational element turns with its edges, not with F: its Hessian is taken whole)
+        if stress is not None and (nq > 1 or law in _ENERGIES):
             Hv = _hessian_vector_by_quadrature_point(stress, x, ca.reshape(lam_e, 3, nn).T, Gs, ws, *params)
-            if mixed:  # the volumetric part couples the points: its own (small) graph, differentiated twice
-                fv = ca.reshape(_mean_dilatation_force(x, Gs, ws, params[-1]).T, nd, 1)
-                Hv += ca.jacobian(ca.mtimes(ca.jacobian(fv, xv).T, lam_e), xv)
+            if mixed:  # the volumetric part couples the points
+                Hv += _mean_dilatation_hessian_vector(x, ca.reshape(lam_e, 3, nn).T, Gs, ws, params[-1])
         else:
             Hv = ca.jacobian(ca.mtimes(K.T, lam_e), xv)
         out["hessian_vector"] = ca.Function(f"{tag}_hessian_vector", ins + [lam_e],
