@@ -62,3 +62,9 @@ def coarse_problem_file(tmp_path):
 def run_cli(*args):
     """``casadi-ws ARGS`` in a subprocess, output captured."""
     return subprocess.run([sys.executable, "-m", "casadi_ws.cli", *map(str, args)], capture_output=True, text=True)
+
+
+def pytest_collection_modifyitems(config, items):
+    """The slow tests first (a stable sort): `make test`'s two workers take tests in order, and a long test
+    handed out last keeps one worker busy while the other idles."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
