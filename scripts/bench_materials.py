@@ -7,6 +7,7 @@ same cable tensions bend each about as far; the strain-energy laws add their own
 C10 / 10; Ogden alpha = 1.3, 5, -2). Kernels are compiled before timing (once per machine).
 
     python scripts/bench_materials.py [--no-fb]
+    python scripts/bench_materials.py --compile    # only: each new kernel's size and compile time, printed
 """
 
 from __future__ import annotations
@@ -79,7 +80,33 @@ def fb_runs() -> list[str]:
     return rows
 
 
+def compile_times() -> None:
+    """Each strain-energy kernel's SX size and compile time, into an empty cache."""
+    import os
+    import tempfile
+
+    os.environ["CASADI_WS_CACHE"] = tempfile.mkdtemp()
+    from casadi_ws.fem.elements import TET4, TET10
+    from casadi_ws.fem.kernels import ElementBatch
+    from casadi_ws.fem.materials import element_functions
+
+    for element in (TET4, TET10):
+        for kernel in ("mooney_rivlin", "yeoh", "ogden3", "yeoh_mixed", "ogden3_mixed"):
+            if element is TET4 and kernel.endswith("_mixed"):
+                continue  # one quadrature point: the same element
+            funs = element_functions(kernel, element)
+            cells = []
+            for name in ("force", "stiffness", "hessian_vector"):
+                t = time.perf_counter()
+                batch = ElementBatch(funs[name])
+                cells.append(f"{name} {funs[name].n_nodes() / 1e3:.1f}k nodes, {time.perf_counter() - t:.1f} s "
+                             f"({batch.backend})")
+            print(f"| {element.name} | {kernel} | " + " | ".join(cells) + " |", flush=True)
+
+
 def main() -> None:
+    if "--compile" in sys.argv:
+        return compile_times()
     body = [f"Machine: {machine()}.", "",
             "`python scripts/bench_materials.py`: the 10-node trunk (`trunk_2cables_order2`, 1701 nodes, 960 "
             "tetrahedra, 4374 free dofs) with each law at the trunk's small-strain stiffness (E = 18 MPa, "
