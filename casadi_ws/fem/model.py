@@ -118,35 +118,8 @@ class StaticModel:
         """The contact rows (and unknowns) among the free dofs."""
         self.X = np.concatenate([mesh.nodes.reshape(-1), np.zeros(self.n_extra)])
 
-        # --- elements: grouped by law (a region may have its own), one compiled kernel per law
         mat = problem.material
-        Xe = mesh.nodes[mesh.tets]
-        w, G = element.rest_geometry(Xe)
-        law = np.zeros(mesh.n_tets, dtype=np.int64)  # index into materials: the body's, then the regions'
-        materials = [mat]
-        for tets, region in problem.regions:
-            law[tets] = len(materials)
-            materials.append(region)
-        rho = np.array([m.density for m in materials])[law]
-        nd = element.n_dof
-        self._edofs = (3 * mesh.tets[:, :, None] + np.arange(3)[None, None, :]).reshape(-1, nd)
-        Xl = (Xe - Xe[:, :1]).reshape(-1, nd)  # element-local: see materials' note on round-off
-        Gl = G.reshape(G.shape[0], -1)
-        models = list(dict.fromkeys(m.kernel for m in materials))
-        self.element_groups: list[_ElementGroup] = []
-        """The elements of each law, with their inputs and compiled kernels (one group if the body has one
-        law, as usual)."""
-        for model in models:
-            ks = [k for k, m in enumerate(materials) if m.kernel == model]
-            idx = np.flatnonzero(np.isin(law, ks))
-            params = np.array([materials[k].parameters for k in ks])[np.searchsorted(ks, law[idx])]
-            funs = element_functions(model, element, hessian=False)
-            self.element_groups.append(_ElementGroup(
-                model, None if len(models) == 1 else idx, self._edofs[idx], Xl[idx], Gl[idx],
-                np.column_stack([w[idx], params]), funs, ElementBatch(funs["force"], backend),
-                ElementBatch(funs["stiffness"], backend)))
-        self.element_functions = self.element_groups[0].functions
-        self.backend = self.element_groups[0].force.backend
+        Xe, w, rho = self._build_elements(backend)
 
         # --- loads: consistent gravity loads and point loads on embedded points
         F = np.zeros(self.n_dof)
@@ -191,7 +164,6 @@ class StaticModel:
         self.C_free = self.C[:, self.free].tocsc()
 
         self._force_scale(w)
-        self._G_qp = G  # (m, n_qp, n_nodes, 3): deformation gradients for the admissibility checks
 
     def _register_terms(self, fixed) -> list:
         """The terms after the elements and actuators, each given its rows at the end of the state."""
@@ -210,6 +182,40 @@ class StaticModel:
             t.state = slice(self.n_mech + start - self.n_free_mech, self.n_mech + start - self.n_free_mech + t.n_rows)
             start += t.n_rows
         return terms
+
+    def _build_elements(self, backend: str):
+        """The element groups: the elements of each kernel (a region may have a law of its own), their rest
+        inputs and compiled kernels. Returns the elements' rest nodes, quadrature weights and densities."""
+        problem, mesh, element = self.problem, self.mesh, self.element
+        Xe = mesh.nodes[mesh.tets]
+        w, G = element.rest_geometry(Xe)
+        law = np.zeros(mesh.n_tets, dtype=np.int64)  # index into materials: the body's, then the regions'
+        materials = [problem.material]
+        for tets, region in problem.regions:
+            law[tets] = len(materials)
+            materials.append(region)
+        rho = np.array([m.density for m in materials])[law]
+        nd = element.n_dof
+        self._edofs = (3 * mesh.tets[:, :, None] + np.arange(3)[None, None, :]).reshape(-1, nd)
+        Xl = (Xe - Xe[:, :1]).reshape(-1, nd)  # element-local: see materials' note on round-off
+        Gl = G.reshape(G.shape[0], -1)
+        self._G_qp = G  # (m, n_qp, n_nodes, 3): deformation gradients for the admissibility checks
+        models = list(dict.fromkeys(m.kernel for m in materials))
+        self.element_groups: list[_ElementGroup] = []
+        """The elements of each law, with their inputs and compiled kernels (one group if the body has one
+        law, as usual)."""
+        for model in models:
+            ks = [k for k, m in enumerate(materials) if m.kernel == model]
+            idx = np.flatnonzero(np.isin(law, ks))
+            params = np.array([materials[k].parameters for k in ks])[np.searchsorted(ks, law[idx])]
+            funs = element_functions(model, element, hessian=False)
+            self.element_groups.append(_ElementGroup(
+                model, None if len(models) == 1 else idx, self._edofs[idx], Xl[idx], Gl[idx],
+                np.column_stack([w[idx], params]), funs, ElementBatch(funs["force"], backend),
+                ElementBatch(funs["stiffness"], backend)))
+        self.element_functions = self.element_groups[0].functions
+        self.backend = self.element_groups[0].force.backend
+        return Xe, w, rho
 
     def _force_scale(self, w):
         """The force scale under which a residual counts as zero. Loads of exactly 0 give q = 0, but the
