@@ -114,11 +114,6 @@ class Material:
         name = f"ogden{len(dict(self.constants)['mu'])}" if self.model == "ogden" else self.model
         return name + "_mixed" if self.formulation == "mixed" and self.model in HYPERELASTIC_CONSTANTS else name
 
-    @property
-    def shear_modulus(self) -> float:
-        """The small-strain shear modulus mu0 in Pa."""
-        return self.young_modulus / (2.0 * (1.0 + self.poisson_ratio))
-
 
 def initial_shear_modulus(model: str, constants: dict) -> float:
     """mu0 of a strain-energy law's constants (Abaqus' convention)."""
@@ -226,21 +221,21 @@ def _neohookean_stress(F, mu, lam):
 
 
 def _isochoric_invariants(F):
-    """(I1b, I2b, J) of the deformation gradient F."""
+    """(I1b, I2b) of the deformation gradient F."""
     J = ca.det(F)
     C = ca.mtimes(F.T, F)
     I1 = ca.trace(C)
     I2 = 0.5 * (I1**2 - ca.trace(ca.mtimes(C, C)))
-    return J ** (-2.0 / 3.0) * I1, J ** (-4.0 / 3.0) * I2, J
+    return J ** (-2.0 / 3.0) * I1, J ** (-4.0 / 3.0) * I2
 
 
 def _mooney_rivlin_energy(F, p):
-    I1b, I2b, J = _isochoric_invariants(F)
+    I1b, I2b = _isochoric_invariants(F)
     return p[0] * (I1b - 3) + p[1] * (I2b - 3)
 
 
 def _yeoh_energy(F, p):
-    I1b, _, J = _isochoric_invariants(F)
+    I1b, _ = _isochoric_invariants(F)
     return p[0] * (I1b - 3) + p[1] * (I1b - 3) ** 2 + p[2] * (I1b - 3) ** 3
 
 

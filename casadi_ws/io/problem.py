@@ -681,7 +681,7 @@ def _read_law(r: _Reader, m: dict, key: str, mesh: Mesh, base: Material | None) 
                                        f"bulk_modulus, d1 or poisson_ratio, not by young_modulus")
     for k in sorted((_CONSTANTS - set(names)) & set(m)):
         r.fail(f"{key}.{k}", f"is not a constant of {model} (its constants: {', '.join(names)})")
-    constants = dict(inherit.constants) if inherit else {k: entry.get(k, 0.0) for k in names if k in entry}
+    constants = dict(inherit.constants) if inherit else {k: entry[k] for k in names if k in entry}
     for k in names:
         if k in m:
             constants[k] = _numbers(r, m[k], f"{key}.{k}") if model == "ogden" else r.number(m, k, key)
