@@ -56,7 +56,7 @@ HYPERELASTIC_CONSTANTS = {"mooney_rivlin": ("c10", "c01"), "yeoh": ("c10", "c20"
 """The constants of each strain-energy law, in the order of the kernel's parameters; K follows them. Ogden's
 are lists of N terms: mu_i (Pa) and alpha_i (dimensionless)."""
 MAX_OGDEN_TERMS = 6
-FORMULATIONS = ("displacement", "mixed")
+FORMULATIONS = ("displacement", "mixed", "taylor_hood")
 MATERIAL_MODELS = ("linear", "corotational", "neohookean", *HYPERELASTIC_CONSTANTS)
 
 
@@ -82,8 +82,10 @@ class Material:
     takes its neo-Hookean member (C10 = mu/2, the others 0; Ogden: one term, alpha = 2)."""
     formulation: str = "displacement"
     """How a strain-energy law's volumetric term is integrated: ``displacement`` (at every quadrature point)
-    or ``mixed`` (a constant pressure per element, condensed on the element: the mean dilatation, which does
-    not lock on 10-node tetrahedra as nu -> 0.5). The laws given by E and nu take ``displacement``."""
+    , ``mixed`` (a constant pressure per element, condensed on the element: the mean dilatation, which does
+    not lock on 10-node tetrahedra as nu -> 0.5) or ``taylor_hood`` (a pressure continuous across elements,
+    linear on each 10-node tetrahedron, one unknown per corner node: :class:`casadi_ws.fem.pressure.
+    ContinuousPressure`). The laws given by E and nu take ``displacement``."""
 
     def __post_init__(self):
         if self.model in HYPERELASTIC_CONSTANTS and not self.constants:
@@ -112,7 +114,9 @@ class Material:
     def kernel(self) -> str:
         """The name of its element kernels: the law, with Ogden's number of terms (``ogden3``)."""
         name = f"ogden{len(dict(self.constants)['mu'])}" if self.model == "ogden" else self.model
-        return name + "_mixed" if self.formulation == "mixed" and self.model in HYPERELASTIC_CONSTANTS else name
+        if self.model not in HYPERELASTIC_CONSTANTS or self.formulation == "displacement":
+            return name
+        return name + ("_mixed" if self.formulation == "mixed" else "_iso")
 
 
 def initial_shear_modulus(model: str, constants: dict) -> float:
@@ -277,11 +281,12 @@ def _ogden_energy(F, p):
 _ENERGIES = {"mooney_rivlin": _mooney_rivlin_energy, "yeoh": _yeoh_energy, "ogden": _ogden_energy}
 
 
-def _law(kernel: str) -> tuple[str, int, bool]:
-    """(law, number of material parameters, mixed) of a kernel name (``ogden3``: Ogden with 3 terms;
-    ``yeoh_mixed``: Yeoh with a constant pressure per element)."""
-    mixed = kernel.endswith("_mixed")
-    kernel = kernel.removesuffix("_mixed")
+def _law(kernel: str) -> tuple[str, int, str]:
+    """(law, number of material parameters, volumetric part) of a kernel name (``ogden3``: Ogden with 3
+    terms; ``yeoh_mixed``: Yeoh with a constant pressure per element, volumetric part "mixed"; ``yeoh_iso``:
+    its isochoric part only, "iso", the pressure being a term of the model's; else "")."""
+    mixed = next((v for v in ("mixed", "iso") if kernel.endswith("_" + v)), "")
+    kernel = kernel.removesuffix("_" + mixed) if mixed else kernel
     if kernel.startswith("ogden") and kernel[5:].isdigit():
         return "ogden", 2 * int(kernel[5:]) + 1, mixed
     if kernel in HYPERELASTIC_CONSTANTS:
@@ -385,7 +390,7 @@ def _element_force(model: str, u, X, Gs, ws, *params):
     if law in _ENERGIES:
         stress = _energy_stress(model, volumetric=not mixed)
         f = sum(w * ca.mtimes(G, stress(ca.SX.eye(3) + ca.mtimes(u.T, G), *params).T) for G, w in zip(Gs, ws))
-        return f + _mean_dilatation_force(u, Gs, ws, params[-1]) if mixed else f
+        return f + _mean_dilatation_force(u, Gs, ws, params[-1]) if mixed == "mixed" else f
     mu, lam = params
     if model == "linear":
         return sum(_linear_force(u, G, w, mu, lam) for G, w in zip(Gs, ws))
@@ -451,7 +456,7 @@ def element_functions(model: str, element: ElementType = TET4, hessian: bool = T
         # (a 4-node corotational element turns with its edges, not with F: its Hessian is taken whole)
         if stress is not None and (nq > 1 or law in _ENERGIES):
             Hv = _hessian_vector_by_quadrature_point(stress, x, ca.reshape(lam_e, 3, nn).T, Gs, ws, *params)
-            if mixed:  # the volumetric part couples the points
+            if mixed == "mixed":  # the volumetric part couples the points
                 Hv += _mean_dilatation_hessian_vector(x, ca.reshape(lam_e, 3, nn).T, Gs, ws, params[-1])
         else:
             Hv = ca.jacobian(ca.mtimes(K.T, lam_e), xv)

@@ -39,6 +39,7 @@ import scipy.sparse as sp
 
 from ..actuation.base import quantity_functions
 from .contact import contact_set, split_faces
+from .pressure import ContinuousPressure
 from .terms import ObstacleContact, SelfContact, fischer_burmeister
 from .kernels import ElementBatch
 from .materials import element_functions
@@ -106,16 +107,25 @@ class StaticModel:
         self.contact = contact_set(mesh, getattr(problem, "obstacles", []), ~fixed.all(axis=1),
                                    problem.material.young_modulus)
         """The contact points with the obstacles (:class:`casadi_ws.fem.contact.ContactSet`), or None."""
+        self._backend = backend
         self.terms = self._register_terms(fixed)
-        """The registered terms (:mod:`casadi_ws.fem.terms`): contact with obstacles, self-contact. Their
-        unknowns (contact forces over kappa) follow the intensities in the state."""
+        """The registered terms (:mod:`casadi_ws.fem.terms`): contact with obstacles, self-contact, the
+        continuous pressure (:mod:`casadi_ws.fem.pressure`). Their unknowns (contact forces over kappa,
+        pressures over kappa) follow the intensities in the state."""
+        self.pivot_threshold = 0.0 if any(t.negatives for t in self.terms) else 0.01
+        """SuperLU's diag_pivot_thresh for this model's tangents (:func:`casadi_ws.solvers.equilibrium.
+        factorize`): 0 where a term makes the tangent a symmetric saddle point (the pressure's), which is
+        quasi-definite where stable and so factorises with diagonal pivots, whose signs the stability test
+        reads; 0.01 otherwise."""
+        self.has_contact = any(t.n_rows for t in self._contact_terms())
+        """Whether the model has contact points (the Newton steps' contact safeguards apply)."""
         self.n_con = sum(t.n_rows for t in self.terms)
         self.n_extra = self.n_lam + self.n_con
         self.n_dof = self.n_mech + self.n_extra
         self.free = np.concatenate([self.free_mech, self.n_mech + np.arange(self.n_extra)])
         self.n_free = self.free.size
         self.con_rows = slice(self.n_free_mech + self.n_lam, self.n_free)
-        """The contact rows (and unknowns) among the free dofs."""
+        """The terms' rows (and unknowns) among the free dofs."""
         self.X = np.concatenate([mesh.nodes.reshape(-1), np.zeros(self.n_extra)])
 
         mat = problem.material
@@ -176,6 +186,13 @@ class StaticModel:
         for pair in getattr(self.problem, "self_contact", []):
             terms.append(SelfContact(pair["name"], pair["points"][moving[pair["points"]]], split_faces(pair["faces"]),
                                      self.mesh.nodes, pos, self.problem.material.young_modulus, pair.get("reach")))
+        th = self._taylor_hood_elements()
+        if th.size:
+            tets = self.mesh.tets[th]
+            w, G = self.element.rest_geometry(self.mesh.nodes[tets])
+            edofs = (3 * tets[:, :, None] + np.arange(3)).reshape(th.size, -1)
+            bulk = np.array([m.parameters[-1] for m in self._materials()[0]])[self._materials()[1][th]]
+            terms.append(ContinuousPressure(tets, edofs, w, G, bulk, self.n_free_mech, self._backend))
         start = self.n_free_mech + self.n_lam
         for t in terms:
             t.rows = slice(start, start + t.n_rows)
@@ -183,17 +200,32 @@ class StaticModel:
             start += t.n_rows
         return terms
 
+    def _materials(self):
+        """(materials, index of each element's): the body's, then the regions' with a law or constants of
+        their own."""
+        law = np.zeros(self.mesh.n_tets, dtype=np.int64)
+        materials = [self.problem.material]
+        for tets, region in self.problem.regions:
+            law[tets] = len(materials)
+            materials.append(region)
+        return materials, law
+
+    def _taylor_hood_elements(self) -> np.ndarray:
+        """The elements whose law takes the continuous pressure (:mod:`casadi_ws.fem.pressure`)."""
+        materials, law = self._materials()
+        th = [k for k, m in enumerate(materials) if m.kernel.endswith("_iso")]
+        if th and self.element.name != "tet10":
+            raise ModelError("formulation taylor_hood needs 10-node tetrahedra (order: 2): a linear pressure on "
+                             "4-node ones locks")
+        return np.flatnonzero(np.isin(law, th))
+
     def _build_elements(self, backend: str):
         """The element groups: the elements of each kernel (a region may have a law of its own), their rest
         inputs and compiled kernels. Returns the elements' rest nodes, quadrature weights and densities."""
         problem, mesh, element = self.problem, self.mesh, self.element
         Xe = mesh.nodes[mesh.tets]
         w, G = element.rest_geometry(Xe)
-        law = np.zeros(mesh.n_tets, dtype=np.int64)  # index into materials: the body's, then the regions'
-        materials = [problem.material]
-        for tets, region in problem.regions:
-            law[tets] = len(materials)
-            materials.append(region)
+        materials, law = self._materials()
         rho = np.array([m.density for m in materials])[law]
         nd = element.n_dof
         self._edofs = (3 * mesh.tets[:, :, None] + np.arange(3)[None, None, :]).reshape(-1, nd)
@@ -356,6 +388,7 @@ class StaticModel:
         ccount = np.bincount(ukey // self.n_free, minlength=self.n_free)
         self._k_indptr = np.concatenate([[0], np.cumsum(ccount)]).astype(np.int32)
         self._k_nnz = ukey.size
+        self._term_slots = {}
 
     def hessian_vector_function(self, group: int = 0):
         """The element function of d(K_e^T lam_e)/du_e (for the NLPs' Hessians) of the elements of a law,
@@ -423,7 +456,10 @@ class StaticModel:
         for (cs, rs, ds), values in zip(self._border_slots, border or ()):
             data[cs], data[rs], data[ds] = values
         for keys, values in terms:
-            data += np.bincount(self.slots(keys), weights=values, minlength=self._k_nnz)
+            cached = self._term_slots.get(id(keys))
+            if cached is None or cached[0] is not keys:  # a term that keeps its keys is looked up once
+                cached = self._term_slots[id(keys)] = (keys, self.slots(keys))
+            data += np.bincount(cached[1], weights=values, minlength=self._k_nnz)
         return sp.csc_matrix((data, self._k_rows, self._k_indptr), shape=(self.n_free, self.n_free))
 
     def slots(self, keys: np.ndarray) -> np.ndarray:
@@ -560,10 +596,11 @@ class StaticModel:
         if self.n_lam:
             R[self.n_free_mech:self.n_free_mech + self.n_lam] = self._prescribed_rows(q, u, Q)[0]
         if self.terms:
-            R0 = R.copy()
             for t in self.terms:
+                R0 = R.copy() if t.applied else None
                 t.residual(self, q, u, R)
-            ext = ext + (R0 - R)  # the contact forces join the applied ones in the scale
+                if t.applied:
+                    ext = ext + (R0 - R)  # the contact forces join the applied ones in the scale
             ext[self.con_rows] = 0.0
         if with_scale:
             # 1e-6 of the unassembled element forces: the assembly's round-off (~1e-16 of them) then stays

@@ -41,7 +41,13 @@ class Term:
     ``state``, a slice of the full state, set when the model registers it)."""
 
     name = ""
+    applied = True
+    """Whether its nodal forces count as applied loads in the residual's scale (contact forces do)."""
     n_rows = 0
+    negatives = None
+    """How many negative eigenvalues its block adds to a stable tangent when its rows keep the tangent
+    symmetric (a saddle point's: the pressure's n_rows), so that the stability test reads them off the
+    pivots; None when they do not (contact rows): the test then factorises the stiffness it holds."""
     rows = slice(0, 0)
     state = slice(0, 0)
 

@@ -37,7 +37,7 @@ def fingerprint(method: str, model, settings: dict) -> str:
               *(g.Pe for g in model.element_groups), model.prescribed):
         h.update(np.ascontiguousarray(a).tobytes())
     pb = model.problem
-    h.update(json.dumps([asdict(pb.material), asdict(pb.solver), [a.describe() for a in model.actuators],
+    h.update(json.dumps([asdict(pb.material), [asdict(m) for _, m in pb.regions], asdict(pb.solver), [a.describe() for a in model.actuators],
                          asdict(pb.admissibility), [o.describe() for o in getattr(pb, "obstacles", [])]],
                         default=float).encode())
     h.update(json.dumps(settings, sort_keys=True, default=str).encode())

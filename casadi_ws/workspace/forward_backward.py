@@ -222,7 +222,7 @@ class Exploration:
         todo = []
         prefilter = self.settings.prefilter
         obstacles = self.problem.obstacles if self.model.contact is not None else []
-        if self.model.n_con and self.model.min_gap(cfg.q) < eta:
+        if self.model.has_contact and self.model.min_gap(cfg.q) < eta:
             # near a contact the linearisation cannot tell which cells are out of reach: it holds the
             # contacts that releasing an input would open, and misses those a step would close (the tip then
             # slides along the obstacle or the body)

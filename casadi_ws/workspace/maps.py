@@ -77,7 +77,7 @@ def state_maps(model, q, u) -> dict:
     d = direction(model, q)
     axis = _tip_axis(model)[2]
     # the obstacles that points press on (the others' forces are the smoothing's ~eps^2 / (kappa g))
-    contact = sum(np.linalg.norm(c["force"]) for c in model.contacts(q) if c["points"]) if getattr(model, "n_con", 0) else 0.0
+    contact = sum(np.linalg.norm(c["force"]) for c in model.contacts(q) if c["points"]) if getattr(model, "has_contact", False) else 0.0
     return {"effort": float(effort(model, u)[0]), "tilt": float(np.degrees(np.arccos(np.clip(d @ axis, -1.0, 1.0)))),
             "contact": float(contact), "direction": d, "states": model.actuator_states(q), "intensities": model.intensities(q, u)}
 
