@@ -631,7 +631,7 @@ def _read_regions(r: _Reader, lst, mesh: Mesh, material: Material) -> list:
 LOCKING_NU = 0.49
 """Above this Poisson ratio 4-node tetrahedra are refused: they lock (a thick-walled sphere's volume change
 under pressure is 77 % low at 0.49, 95 % at 0.499; docs/methods.md "Nearly incompressible silicone"), and
-10-node ones take the mixed formulation by default."""
+10-node ones take the continuous pressure (``formulation: taylor_hood``) by default."""
 
 
 def _read_material(r: _Reader, m: dict, key: str, mesh: Mesh, base: Material | None = None) -> Material:
@@ -642,7 +642,7 @@ def _read_material(r: _Reader, m: dict, key: str, mesh: Mesh, base: Material | N
         given = next((k for k in ("poisson_ratio", "bulk_modulus", "d1") if k in m), None)
         r.fail(f"{key}.{given}" if given else key,
                f"nu = {mat.poisson_ratio:.4g}: 4-node tetrahedra lock above nu = {LOCKING_NU} (a thick sphere's "
-               f"volume change is 95 % low at 0.499); mesh with order: 2, whose mixed formulation does not lock")
+               f"volume change is 95 % low at 0.499); mesh with order: 2, whose pressure formulations do not lock")
     return mat
 
 
@@ -705,9 +705,12 @@ def _read_law(r: _Reader, m: dict, key: str, mesh: Mesh, base: Material | None) 
     if "formulation" in m or inherit:
         formulation = m.get("formulation", inherit.formulation if inherit else None)
     else:  # chosen by measurement (docs/methods.md): displacement unless nearly incompressible on 10 nodes
-        formulation = "mixed" if mat.poisson_ratio >= LOCKING_NU and mesh.tets.shape[1] == 10 else "displacement"
+        formulation = "taylor_hood" if mat.poisson_ratio >= LOCKING_NU and mesh.tets.shape[1] == 10 else "displacement"
     if formulation not in FORMULATIONS:
         r.fail(f"{key}.formulation", f"expected one of {', '.join(FORMULATIONS)}, got {formulation!r}")
+    if formulation == "taylor_hood" and mesh.tets.shape[1] == 4:
+        r.fail(f"{key}.formulation", "taylor_hood needs 10-node tetrahedra (mesh order: 2): a linear pressure on "
+                                     "4-node ones locks as the displacement element does")
     return replace(mat, formulation=formulation)
 
 

@@ -27,7 +27,11 @@ pivots) is, when SuperLU swapped no rows, the L D U of K; the count of negative 
 negative eigenvalues of a symmetric K (Sylvester's law of inertia), read off U's diagonal in ~0.3 ms. When
 the count is not zero, or rows were swapped, or K is not symmetric and the count is not zero, the
 eigenvalues of K nearest zero are computed by shift-invert (ARPACK) with a double-precision LU of K at the
-point itself, and the decision is the sign of the smallest real part among them. Arrays store violations
+point itself, and the decision is the sign of the smallest real part among them. A tangent bordered by
+contact or prescribed-quantity rows is judged on the stiffness with them held (:meth:`StaticModel.
+stability_matrix`); one bordered by the continuous pressure's unknowns (a symmetric saddle point) is
+stable iff it has exactly one negative pivot per pressure unknown (Haynsworth's inertia; such models
+factorise with diagonal pivots, see :attr:`StaticModel.pivot_threshold`). Arrays store violations
 as a bit mask (bit i: ``VIOLATIONS[i]``).
 """
 
@@ -195,16 +199,33 @@ def _stability(model, q, u, fac, K):
     """(stable, negative pivots, smallest eigenvalue or None, its mode or None); see the module."""
     from .equilibrium import Factorization, factorize, tangent_factorization
 
-    if getattr(model, "n_lam", 0) or getattr(model, "n_con", 0):
+    saddle = [getattr(t, "negatives", None) for t in getattr(model, "terms", ())]
+    held = bool(getattr(model, "n_lam", 0)) or None in saddle
+    if held:
         # prescribed quantities and contacts border K (a saddle point, whose pivots say nothing): judge the stiffness
         # with them held instead (:meth:`StaticModel.stability_matrix`)
         K = model.stability_matrix(q, u)
         fac = Factorization(factorize(K), q.copy())
     elif fac is None or _stale(fac.q, q):
         fac = tangent_factorization(model, q, u)
+    expected = 0 if held else sum(saddle)
     n_neg = fac.negative_pivots()
-    if n_neg == 0:
+    if n_neg is None and expected:
+        # Newton's LU swapped rows; the saddle point of an energy is quasi-definite where it is stable (its
+        # stiffness block positive definite, the pressure block negative), and such a matrix has an L D L^T
+        # in any order: factorised with diagonal pivots, its pivots are its inertia
+        fac = Factorization(factorize(model.residual_and_tangent(q, u)[1], pivot_threshold=0.0), q.copy())
+        n_neg = fac.negative_pivots()
+    if n_neg == expected:
+        # a symmetric saddle point (the pressure unknowns) whose own block holds exactly its negative
+        # eigenvalues: by Haynsworth's inertia the rest, its Schur complement, is positive definite
         return True, 0, None, None
+    if expected:  # the saddle's pivots did not settle it: the Schur complement's do
+        K = model.stability_matrix(q, u)
+        fac = Factorization(factorize(K), q.copy())
+        n_neg = fac.negative_pivots()
+        if n_neg == 0:
+            return True, 0, None, None
     vals, vecs = smallest_eigenvalues(model, q, u, K)
     k = int(np.argmin(vals.real))
     lam = float(vals[k].real)

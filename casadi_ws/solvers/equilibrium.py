@@ -106,7 +106,7 @@ SINGLE_PRECISION_PROBE = 3e-2
 (else K is factorised in double precision)."""
 
 
-def factorize(K, single: bool = False) -> object:
+def factorize(K, single: bool = False, pivot_threshold: float = 0.01) -> object:
     """LU of K; with ``single``, in single precision where that is accurate enough (Newton's choice).
 
     Why single: the factorisation is most of an equilibrium's cost, and in float32 it takes ~26 % less
@@ -116,13 +116,17 @@ def factorize(K, single: bool = False) -> object:
     verified on is computed in double precision. Sensitivities refine their solves against K
     (:class:`Factorization`). A probe solve with a fixed vector falls back to double precision when its
     error is above ``SINGLE_PRECISION_PROBE``, and so does a matrix singular in single precision.
+
+    ``pivot_threshold``: SuperLU's diag_pivot_thresh (a row is swapped in when the diagonal is below this
+    share of its column's largest entry); 0 keeps the diagonal pivots unless one is exactly zero, so that
+    the LU is an L D L^T of a symmetric K and its pivots give K's inertia (the stability test's use).
     """
     # K is structurally symmetric and nearly numerically symmetric: symmetric mode with a small pivot
     # threshold keeps the fill-reducing ordering of A + A^T (measured ~10 % faster than COLAMD here).
     K = K.tocsc() if not sp.isspmatrix_csc(K) else K
-    opts = dict(diag_pivot_thresh=0.01, options={"SymmetricMode": True})
-    if not K.has_sorted_indices:
-        return sla.splu(K, permc_spec="MMD_AT_PLUS_A", **opts)
+    opts = dict(diag_pivot_thresh=pivot_threshold, options={"SymmetricMode": True})
+    if not K.has_sorted_indices:  # a sum of sparse matrices (the stability test's): its pivots are read too
+        K = K.sorted_indices()
     for o in _ORDERINGS:
         if o.matches(K):
             break
@@ -148,11 +152,11 @@ def factorize(K, single: bool = False) -> object:
 def tangent_factorization(model, q: np.ndarray, u: np.ndarray) -> Factorization:
     """A fresh LU of the tangent K at the equilibrium (q, u)."""
     _, K, _ = model.residual_and_tangent(q, u)
-    return _factorization(K, q)
+    return _factorization(K, q, model)
 
 
-def _factorization(K, q) -> Factorization:
-    return Factorization(factorize(K, single=True), q.copy())
+def _factorization(K, q, model=None) -> Factorization:
+    return Factorization(factorize(K, single=True, pivot_threshold=getattr(model, "pivot_threshold", 0.01)), q.copy())
 
 
 @dataclass
@@ -248,14 +252,14 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
         if fresh:
             _, K, _ = model.residual_and_tangent(q, u, load)
             try:
-                fac = _factorization(K, q)
+                fac = _factorization(K, q, model)
             except RuntimeError:  # exactly singular tangent
                 return stop(DIVERGED)
             nfac += 1
             dq = -fac.solve(R)
         its += 1
         size = np.linalg.norm(dq)
-        alpha = alpha0 = model.contact_step_limit(q, dq) if getattr(model, "n_con", 0) else 1.0
+        alpha = alpha0 = model.contact_step_limit(q, dq) if getattr(model, "has_contact", False) else 1.0
         while True:
             q_try = q.copy()
             q_try[free] += alpha * dq
@@ -269,7 +273,7 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
                 ok = True
             if not ok and not fresh and np.isfinite(theta):
                 ok = bool(np.linalg.norm(R_try) / scale_try < 1e-2 * rel)
-            if not ok and fresh and getattr(model, "n_con", 0) and np.isfinite(theta):
+            if not ok and fresh and getattr(model, "has_contact", False) and np.isfinite(theta):
                 # a contact point grazing its surface (gap and force both ~0) makes the smoothed complementarity
                 # row all curvature: the Newton increments stop contracting while the residual still falls
                 ok = bool(np.linalg.norm(R_try) / scale_try < (1.0 - alpha / 4.0) * rel)
