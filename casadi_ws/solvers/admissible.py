@@ -205,7 +205,7 @@ def _stability(model, q, u, fac, K):
         # prescribed quantities and contacts border K (a saddle point, whose pivots say nothing): judge the stiffness
         # with them held instead (:meth:`StaticModel.stability_matrix`)
         K = model.stability_matrix(q, u)
-        fac = Factorization(factorize(K), q.copy())
+        fac = Factorization(factorize(K, reuse_ordering=False), q.copy())
     elif fac is None or _stale(fac.q, q):
         fac = tangent_factorization(model, q, u)
     expected = 0 if held else sum(saddle)
@@ -222,7 +222,7 @@ def _stability(model, q, u, fac, K):
         return True, 0, None, None
     if expected:  # the saddle's pivots did not settle it: the Schur complement's do
         K = model.stability_matrix(q, u)
-        fac = Factorization(factorize(K), q.copy())
+        fac = Factorization(factorize(K, reuse_ordering=False), q.copy())
         n_neg = fac.negative_pivots()
         if n_neg == 0:
             return True, 0, None, None

@@ -106,7 +106,7 @@ SINGLE_PRECISION_PROBE = 3e-2
 (else K is factorised in double precision)."""
 
 
-def factorize(K, single: bool = False, pivot_threshold: float = 0.01) -> object:
+def factorize(K, single: bool = False, pivot_threshold: float = 0.01, reuse_ordering: bool = True) -> object:
     """LU of K; with ``single``, in single precision where that is accurate enough (Newton's choice).
 
     Why single: the factorisation is most of an equilibrium's cost, and in float32 it takes ~26 % less
@@ -120,13 +120,15 @@ def factorize(K, single: bool = False, pivot_threshold: float = 0.01) -> object:
     ``pivot_threshold``: SuperLU's diag_pivot_thresh (a row is swapped in when the diagonal is below this
     share of its column's largest entry); 0 keeps the diagonal pivots unless one is exactly zero, so that
     the LU is an L D L^T of a symmetric K and its pivots give K's inertia (the stability test's use).
+    ``reuse_ordering`` False: a one-off matrix (the stability test's held stiffness, whose pattern follows
+    the contact set), ordered for itself and not cached, so it does not evict the tangent's ordering.
     """
     # K is structurally symmetric and nearly numerically symmetric: symmetric mode with a small pivot
     # threshold keeps the fill-reducing ordering of A + A^T (measured ~10 % faster than COLAMD here).
     K = K.tocsc() if not sp.isspmatrix_csc(K) else K
     opts = dict(diag_pivot_thresh=pivot_threshold, options={"SymmetricMode": True})
-    if not K.has_sorted_indices:  # a sum of sparse matrices (the stability test's): its pivots are read too
-        K = K.sorted_indices()
+    if not (reuse_ordering and K.has_sorted_indices):
+        return _PermutedLU(sla.splu(K, permc_spec="MMD_AT_PLUS_A", **opts), np.arange(K.shape[0]))
     for o in _ORDERINGS:
         if o.matches(K):
             break
