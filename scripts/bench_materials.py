@@ -36,8 +36,14 @@ LAWS = {
     "ogden, 3 terms": {"model": "ogden", "mu": [0.9 * MU, 0.05 * MU, 0.05 * MU], "alpha": [1.3, 5.0, -2.0],
                        "poisson_ratio": NU},
     "yeoh, mixed": {"model": "yeoh", "c10": MU / 2, "c20": MU / 20, "poisson_ratio": NU, "formulation": "mixed"},
-    "yeoh, nu = 0.49 (mixed)": {"model": "yeoh", "c10": MU / 2, "c20": MU / 20, "poisson_ratio": 0.49},
+    "yeoh, nu = 0.49 (mixed)": {"model": "yeoh", "c10": MU / 2, "c20": MU / 20, "poisson_ratio": 0.49,
+                                "formulation": "mixed"},
+    "yeoh, nu = 0.49 (taylor_hood)": {"model": "yeoh", "c10": MU / 2, "c20": MU / 20, "poisson_ratio": 0.49,
+                                      "formulation": "taylor_hood"},
 }
+
+
+FB_LAWS = ("corotational", "yeoh", "yeoh, nu = 0.49 (mixed)", "yeoh, nu = 0.49 (taylor_hood)")
 
 
 def problem(material: dict):
@@ -68,7 +74,7 @@ def equilibria() -> list[str]:
 def fb_runs() -> list[str]:
     rows = ["| law | FB time (2 workers) | cells | backward solves | peak memory of this process |",
             "|---|---|---|---|---|"]
-    for name in ("corotational", "yeoh"):
+    for name in FB_LAWS:
         pb = problem(LAWS[name])
         m = StaticModel(pb)
         t = time.perf_counter()
