@@ -458,6 +458,8 @@ class StaticModel:
         for keys, values in terms:
             cached = self._term_slots.get(id(keys))
             if cached is None or cached[0] is not keys:  # a term that keeps its keys is looked up once
+                if len(self._term_slots) > 4 * len(self.terms):  # contact terms build new keys every time
+                    self._term_slots.clear()
                 cached = self._term_slots[id(keys)] = (keys, self.slots(keys))
             data += np.bincount(cached[1], weights=values, minlength=self._k_nnz)
         return sp.csc_matrix((data, self._k_rows, self._k_indptr), shape=(self.n_free, self.n_free))
