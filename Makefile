@@ -1,4 +1,5 @@
-# The README's two set-up commands: `make demo` and `make test`. Both create .venv if missing and install.
+# The README's two set-up commands: `make demo` and `make test`. Both create .venv if missing and install
+# (with the `fast` extra: PARDISO, which the tests cover beside SuperLU).
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -9,7 +10,7 @@ STAMP  := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[test]'
+	$(BIN)/python -m pip install -q -e '.[test,fast]'
 	touch $(STAMP)
 
 demo: $(STAMP)

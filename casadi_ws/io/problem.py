@@ -23,6 +23,7 @@ from ..fem.silicones import SILICONES
 from ..fem.mesh import (Mesh, MeshError, box_mesh, closest_point_in_tet, embed, load_mesh, quadratic,
                         transform_points, trunk_mesh)
 from ..solvers.admissible import AdmissibilitySettings
+from ..solvers.linear import LINEAR_SOLVERS, available
 
 __all__ = [
     "Problem",
@@ -59,6 +60,9 @@ class SolverSettings:
     newton: str = "builtin"
     """``builtin`` (Newton reusing LU factorisations across iterations and points: the faster) or
     ``rootfinder`` (casadi.rootfinder's Newton with MUMPS on the same residual Function)."""
+    linear: str = "auto"
+    """The sparse factorisation of the tangent (:mod:`casadi_ws.solvers.linear`): ``auto`` (PARDISO where
+    installed, else SuperLU), ``superlu`` or ``pardiso``."""
 
 
 @dataclass
@@ -164,7 +168,7 @@ _ADMISSIBILITY = {"stability", "inversion", "self_penetration", "min_det_F", "pe
                   "keep_inadmissible"}
 _COMPONENTS = {"x": 0, "y": 1, "z": 2}
 _ROUTING = {"angle_deg", "kind", "radius", "taper", "z_start", "z_end", "spacing"}
-_SOLVER = {"tolerance", "max_iterations", "max_load_steps", "newton"}
+_SOLVER = {"tolerance", "max_iterations", "max_load_steps", "newton", "linear"}
 _WORKSPACE = {"method", "n_d", "step", "strategy", "backward", "workers"}
 
 # Largest distance from the mesh allowed for a cable passage point, relative to the mesh's size. SOFA trunk
@@ -930,9 +934,14 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     solver = SolverSettings(r.number(s, "tolerance", "solver", 1e-8, lo=0.0, lo_open=True),
                             r.number(s, "max_iterations", "solver", 30, lo=1, integer=True),
                             r.number(s, "max_load_steps", "solver", 64, lo=1, integer=True),
-                            s.get("newton", "builtin"))
+                            s.get("newton", "builtin"), s.get("linear", "auto"))
     if solver.newton not in ("builtin", "rootfinder"):
         r.fail("solver.newton", f"expected builtin or rootfinder, got {solver.newton!r}")
+    if solver.linear not in LINEAR_SOLVERS:
+        r.fail("solver.linear", f"expected one of {', '.join(LINEAR_SOLVERS)}, got {solver.linear!r}")
+    if not available(solver.linear):
+        r.fail("solver.linear", f"{solver.linear} is not installed here (pip install 'casadi-ws[fast]' brings "
+               "pypardiso and MKL, on x86-64); 'auto' uses it where it is and SuperLU elsewhere")
     w = r.mapping(d.get("workspace") or {}, "workspace", _WORKSPACE)
     workspace = {}
     if "method" in w:

@@ -198,14 +198,16 @@ def _state_limits(model, q, F, out: Admissibility) -> list[str]:
 def _stability(model, q, u, fac, K):
     """(stable, negative pivots, smallest eigenvalue or None, its mode or None); see the module."""
     from .equilibrium import Factorization, factorize, tangent_factorization
+    from .linear import solver_of
 
     saddle = [getattr(t, "negatives", None) for t in getattr(model, "terms", ())]
+    solver = solver_of(model)
     held = bool(getattr(model, "n_lam", 0)) or None in saddle
     if held:
         # prescribed quantities and contacts border K (a saddle point, whose pivots say nothing): judge the stiffness
         # with them held instead (:meth:`StaticModel.stability_matrix`)
         K = model.stability_matrix(q, u)
-        fac = Factorization(factorize(K, reuse_ordering=False), q.copy())
+        fac = Factorization(factorize(K, reuse_ordering=False, solver=solver), q.copy())
     elif fac is None or _stale(fac.q, q):
         fac = tangent_factorization(model, q, u)
     expected = 0 if held else sum(saddle)
@@ -214,7 +216,8 @@ def _stability(model, q, u, fac, K):
         # Newton's LU swapped rows; the saddle point of an energy is quasi-definite where it is stable (its
         # stiffness block positive definite, the pressure block negative), and such a matrix has an L D L^T
         # in any order: factorised with diagonal pivots, its pivots are its inertia
-        fac = Factorization(factorize(model.residual_and_tangent(q, u)[1], pivot_threshold=0.0), q.copy())
+        fac = Factorization(factorize(model.residual_and_tangent(q, u)[1], pivot_threshold=0.0, solver=solver),
+                            q.copy())
         n_neg = fac.negative_pivots()
     if n_neg == expected:
         # a symmetric saddle point (the pressure unknowns) whose own block holds exactly its negative
@@ -222,7 +225,7 @@ def _stability(model, q, u, fac, K):
         return True, 0, None, None
     if expected:  # the saddle's pivots did not settle it: the Schur complement's do
         K = model.stability_matrix(q, u)
-        fac = Factorization(factorize(K, reuse_ordering=False), q.copy())
+        fac = Factorization(factorize(K, reuse_ordering=False, solver=solver), q.copy())
         n_neg = fac.negative_pivots()
         if n_neg == 0:
             return True, 0, None, None
@@ -250,10 +253,11 @@ def smallest_eigenvalues(model, q, u, K=None, k: int = 6):
     """The ``k`` eigenvalues of K (free dofs) nearest zero and their vectors, by shift-invert with a
     double-precision LU of K at (q, u)."""
     from .equilibrium import factorize
+    from .linear import solver_of
 
     if K is None:
         K = model.residual_and_tangent(q, u)[1]
-    lu = factorize(K, single=False)
+    lu = factorize(K, single=False, solver=solver_of(model))
     n = K.shape[0]
     k = min(k, n - 2)
     op = sla.LinearOperator(K.shape, matvec=lu.solve, dtype=float)

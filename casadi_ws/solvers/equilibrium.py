@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..status import Status
-from .linear import SINGLE_PRECISION_PROBE, factorize  # noqa: F401  (re-exported)
+from .linear import SINGLE_PRECISION_PROBE, factorize, solver_of  # noqa: F401  (re-exported)
 
 __all__ = ["CONVERGED", "CONTINUATION_FAILED", "DIVERGED", "Equilibrium", "Factorization", "MAX_ITERATIONS",
            "OUTSIDE_BOUNDS", "factorize", "inside_bounds", "newton_krylov", "solve_equilibrium",
@@ -57,7 +57,8 @@ def tangent_factorization(model, q: np.ndarray, u: np.ndarray) -> Factorization:
 
 
 def _factorization(K, q, model=None) -> Factorization:
-    return Factorization(factorize(K, single=True, pivot_threshold=getattr(model, "pivot_threshold", 0.01)), q.copy())
+    return Factorization(factorize(K, single=True, pivot_threshold=getattr(model, "pivot_threshold", 0.01),
+                                   solver=solver_of(model)), q.copy())
 
 
 @dataclass

@@ -1,15 +1,41 @@
 """Sparse factorisations of the tangent K: the LU behind every Newton step, sensitivity and stability test.
 
-The factorisation is most of an equilibrium's cost; this module is where it is chosen and kept.
+The factorisation is most of an equilibrium's cost (16 of 22 s of one equilibrium of the 18k-dof trunk with
+SuperLU), so it is chosen by name (problem file ``solver.linear``), each backend behind one interface: a
+factorisation object with ``solve(b)`` (vectors or matrices, in double precision), ``negative_pivots()``
+(K's inertia where the backend knows it, else None), ``single`` and ``K`` (factors in single precision and the
+matrix to refine against).
+
+==========  ===================================================================================================
+name        backend
+==========  ===================================================================================================
+superlu     SciPy's SuperLU (always installed): LU in symmetric mode, the minimum-degree ordering of the first
+            factorisation of a pattern reused, diagonal pivots where it can (then its pivots are the inertia)
+pardiso     Intel MKL PARDISO (``pip install casadi-ws[fast]``: pypardiso, which brings MKL; x86-64 only):
+            METIS ordering and symbolic analysis once per pattern (up to 64 live factorisations share it),
+            numeric factorisations after, in double precision; a symmetric K gets a Bunch-Kaufman L D L^T
+            (half the work, its inertia exact unless a pivot was perturbed), an unsymmetric one an LU (no inertia: stability
+            checks then compute eigenvalues, slowly). A numerically singular K is factorised with perturbed
+            pivots instead of refused: Newton's residual test still decides
+auto        where PARDISO is installed: PARDISO for a symmetric K (10-node corotational and every hyperelastic
+            law), SuperLU for an unsymmetric one (the 4-node corotational tangent, 0.5 % unsymmetric), whose
+            diagonal pivots the stability test reads (PARDISO's LU has no inertia); else SuperLU
+==========  ===================================================================================================
 """
 
 from __future__ import annotations
+
+import ctypes
+import weakref
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-__all__ = ["SINGLE_PRECISION_PROBE", "factorize"]
+__all__ = ["LINEAR_SOLVERS", "SINGLE_PRECISION_PROBE", "available", "choose", "factorize", "solver_of"]
+
+LINEAR_SOLVERS = ("auto", "superlu", "pardiso")
+"""The names ``solver.linear`` accepts."""
 
 
 class _Ordering:
@@ -67,8 +93,10 @@ SINGLE_PRECISION_PROBE = 3e-2
 (else K is factorised in double precision)."""
 
 
-def factorize(K, single: bool = False, pivot_threshold: float = 0.01, reuse_ordering: bool = True) -> object:
-    """LU of K; with ``single``, in single precision where that is accurate enough (Newton's choice).
+def factorize(K, single: bool = False, pivot_threshold: float = 0.01, reuse_ordering: bool = True,
+              solver: str = "superlu") -> object:
+    """LU of K by ``solver`` (a name of :data:`LINEAR_SOLVERS` resolved by :func:`choose`); with ``single``,
+    in single precision where that is accurate enough (Newton's choice).
 
     Why single: the factorisation is most of an equilibrium's cost, and in float32 it takes ~26 % less
     time on the trunk (~30 % on the 10-node trunk and the PneuNets finger). Newton loses nothing: its
@@ -84,9 +112,13 @@ def factorize(K, single: bool = False, pivot_threshold: float = 0.01, reuse_orde
     ``reuse_ordering`` False: a one-off matrix (the stability test's held stiffness, whose pattern follows
     the contact set), ordered for itself and not cached, so it does not evict the tangent's ordering.
     """
+    K = K.tocsc() if not sp.isspmatrix_csc(K) else K
+    if solver in ("pardiso", "auto") and (solver == "pardiso" or available("pardiso")):
+        lu = _pardiso_factorize(K, reuse_ordering, unsymmetric=solver == "pardiso")
+        if lu is not None:
+            return lu
     # K is structurally symmetric and nearly numerically symmetric: symmetric mode with a small pivot
     # threshold keeps the fill-reducing ordering of A + A^T (measured ~10 % faster than COLAMD here).
-    K = K.tocsc() if not sp.isspmatrix_csc(K) else K
     opts = dict(diag_pivot_thresh=pivot_threshold, options={"SymmetricMode": True})
     if not (reuse_ordering and K.has_sorted_indices):
         return _PermutedLU(sla.splu(K, permc_spec="MMD_AT_PLUS_A", **opts), np.arange(K.shape[0]))
@@ -110,3 +142,243 @@ def factorize(K, single: bool = False, pivot_threshold: float = 0.01, reuse_orde
             if np.linalg.norm(x - o.probe) < SINGLE_PRECISION_PROBE * np.linalg.norm(o.probe):
                 return _PermutedLU(lu, o.p, K)
     return _PermutedLU(sla.splu(Kp, permc_spec="NATURAL", **opts), o.p)
+
+
+_MISSING: list = []
+
+
+def available(name: str) -> bool:
+    """Whether the backend ``name`` can run in this installation."""
+    if name != "pardiso":
+        return name in LINEAR_SOLVERS
+    if _MISSING:
+        return False
+    try:
+        _mkl()
+    except (ImportError, OSError):
+        _MISSING.append(True)
+        return False
+    return True
+
+
+def choose(name: str) -> str:
+    """What ``name`` means in this installation: ``auto`` stays ``auto`` (per matrix: PARDISO for a symmetric
+    K, SuperLU for an unsymmetric one) where PARDISO is installed, and is ``superlu`` where it is not."""
+    if name == "auto" and not available("pardiso"):
+        return "superlu"
+    return name
+
+
+def solver_of(model) -> str:
+    """The backend of ``model``'s factorisations: its problem's ``solver.linear``, by :func:`choose`."""
+    return choose(getattr(getattr(getattr(model, "problem", None), "solver", None), "linear", "auto"))
+
+
+# ---- PARDISO -------------------------------------------------------------------------------------------
+
+MAX_FACTORS = 64
+"""Numeric factorisations kept at once per symbolic analysis (PARDISO's maxfct); a 65th gets a new analysis.
+Each slot costs memory only while a factorisation lives in it."""
+
+SYMMETRY_TOLERANCE = 1e-10
+"""K is factorised as symmetric when max |K - K^T| is below this share of max |K| (the tangents of
+hyperelastic and corotational laws and cables measure ~1e-16)."""
+
+_LIB: list = []
+
+
+def _mkl():
+    """MKL's ``pardiso`` entry point, from the mkl_rt that pypardiso finds."""
+    if not _LIB:
+        import os
+
+        # Intel's OpenMP threads spin 200 ms after each parallel region by default, holding the core that the
+        # element kernels' threads (:mod:`casadi_ws.fem.kernels`) need next; read when the runtime starts
+        os.environ.setdefault("KMP_BLOCKTIME", "0")
+        import pypardiso
+
+        lib = pypardiso.PyPardisoSolver().libmkl
+        f = lib.pardiso
+        i32 = ctypes.POINTER(ctypes.c_int32)
+        f.argtypes = [ctypes.POINTER(ctypes.c_int64), i32, i32, i32, i32, i32, ctypes.c_void_p, i32, i32, i32, i32,
+                      i32, i32, ctypes.c_void_p, ctypes.c_void_p, i32]
+        f.restype = None
+        lib.MKL_Get_Max_Threads.restype = ctypes.c_int
+        _LIB.extend([f, lib.MKL_Get_Max_Threads])
+    return _LIB[0]
+
+
+class _Pattern:
+    """What PARDISO needs of one sparsity pattern of K (CSC, sorted, structurally symmetric): its upper
+    triangle as 0-based CSR arrays and the gather that fills it, and the map of K's entries to K^T's."""
+
+    def __init__(self, K):
+        self.indptr, self.indices, self.n = K.indptr.copy(), K.indices.copy(), K.shape[0]
+        tag = sp.csc_matrix((np.arange(1, K.nnz + 1, dtype=float), K.indices, K.indptr), shape=K.shape)
+        T = tag.T.tocsc()
+        T.sort_indices()
+        same = np.array_equal(T.indptr, K.indptr) and np.array_equal(T.indices, K.indices)
+        self.transpose = T.data.astype(np.int64) - 1 if same else None  # None: not structurally symmetric
+        self.sample = np.arange(0, K.nnz, 8)
+        # K's CSC arrays read as CSR are K^T's rows; where K = K^T, its upper triangle is the entries of row i
+        # with column >= i
+        col = np.repeat(np.arange(self.n), np.diff(K.indptr))
+        # a diagonally dominant matrix of the pattern (a graph Laplacian plus the identity) for the analysis
+        self.canonical = np.where(K.indices == col, np.diff(K.indptr)[col].astype(float), -1.0)
+        upper = K.indices >= col
+        self.upper = np.flatnonzero(upper)
+        self.u_indptr = np.concatenate([[0], np.cumsum(np.bincount(col[upper], minlength=self.n))]).astype(np.int32)
+        self.u_indices = K.indices[upper].astype(np.int32)
+        self.f_indptr, self.f_indices = K.indptr.astype(np.int32), K.indices.astype(np.int32)
+        self.probe = np.random.default_rng(0).standard_normal(self.n)  # fixed: results never depend on chance
+        self.analyses: dict = {}
+
+    def matches(self, K) -> bool:
+        return (K.indptr.shape == self.indptr.shape and K.indices.shape == self.indices.shape
+                and np.array_equal(K.indptr, self.indptr) and np.array_equal(K.indices, self.indices))
+
+    def symmetric(self, data) -> bool:
+        """Whether K = K^T to :data:`SYMMETRY_TOLERANCE`, judged on a fixed eighth of its entries (a law or
+        term that makes K unsymmetric does so all over it; the whole test cost 23 ms at 18k dofs)."""
+        if self.transpose is None:
+            return False
+        s = self.sample
+        return bool(np.max(np.abs(data[s] - data[self.transpose[s]])) <= SYMMETRY_TOLERANCE * np.max(np.abs(data)))
+
+
+class _Analysis:
+    """One PARDISO handle: the ordering and symbolic analysis of a pattern in one mode (symmetric
+    indefinite or unsymmetric), and up to ``slots`` numeric factorisations sharing it."""
+
+    def __init__(self, pattern: _Pattern, symmetric: bool, slots: int, threads: int):
+        self.n, self.slots = pattern.n, slots
+        self.mtype = -2 if symmetric else 11
+        self.indptr, self.indices = ((pattern.u_indptr, pattern.u_indices) if symmetric
+                                     else (pattern.f_indptr, pattern.f_indices))
+        self.dtype = np.float64
+        iparm = np.zeros(64, np.int32)
+        iparm[0] = 1  # these settings, not the defaults
+        iparm[1] = 2  # METIS ordering
+        iparm[9] = 8 if symmetric else 13  # pivot perturbation 1e-8 / 1e-13 (PARDISO's defaults per type)
+        iparm[10] = iparm[12] = 0  # no scaling or matching: they would follow the analysed values
+        iparm[11] = 0 if symmetric else 2  # the CSC arrays read as CSR are K^T: solve the transposed system
+        iparm[20] = 1  # Bunch-Kaufman pivoting (symmetric indefinite)
+        iparm[34] = 1  # 0-based indices
+        # conditional numerical reproducibility: without it, with 2 threads, the same K gave factors differing
+        # in the last bits from run to run, which chord-Newton amplified (27 iterations or 71 from rest on the
+        # 10-node trunk, in consecutive runs); with it, runs with the same thread count agree bit for bit
+        iparm[33] = threads
+        self.iparm = iparm
+        self.pt = np.zeros(64, np.int64)
+        self.free = list(range(slots, 0, -1))
+        self.live = True
+        # the analysis depends on the values it is given (measured: the same K solved with analyses of two other
+        # tangents differs by 3e-12), so it gets the pattern's fixed ones, not the first matrix's: a result must
+        # not depend on which factorisation of the pattern came first in this process (a worker's history)
+        self.call(1, 11, np.ascontiguousarray(pattern.canonical[pattern.upper] if symmetric else pattern.canonical,
+                                              dtype=self.dtype))
+
+    def call(self, mnum: int, phase: int, data, b=None):
+        nrhs = 1 if b is None or b.ndim == 1 else b.shape[1]
+        b = np.zeros(self.n, self.dtype) if b is None else np.asfortranarray(b, dtype=self.dtype)
+        x = np.zeros_like(b)
+        err = ctypes.c_int32(0)
+        i32 = ctypes.c_int32
+        _mkl()(self.pt.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)), ctypes.byref(i32(self.slots)),
+               ctypes.byref(i32(mnum)), ctypes.byref(i32(self.mtype)), ctypes.byref(i32(phase)),
+               ctypes.byref(i32(self.n)), data.ctypes.data, self.indptr.ctypes.data_as(ctypes.POINTER(i32)),
+               self.indices.ctypes.data_as(ctypes.POINTER(i32)), None, ctypes.byref(i32(nrhs)),
+               self.iparm.ctypes.data_as(ctypes.POINTER(i32)), ctypes.byref(i32(0)), b.ctypes.data, x.ctypes.data,
+               ctypes.byref(err))
+        if err.value == -4:  # zero pivot: singular, as SuperLU says it
+            raise RuntimeError("Factor is exactly singular (PARDISO error -4)")
+        if err.value != 0:
+            raise RuntimeError(f"PARDISO error {err.value} in phase {phase}")
+        return x
+
+    def release(self, slot: int) -> None:
+        if self.live:
+            try:
+                self.call(slot, 0, np.zeros(len(self.indices), self.dtype))
+            except Exception:  # noqa: BLE001  (interpreter shutdown: the library may be gone)
+                return
+            self.free.append(slot)
+
+    def __del__(self):
+        if self.live and _LIB:
+            self.live = False
+            try:
+                self.call(1, -1, np.zeros(len(self.indices), self.dtype))
+            except Exception:  # noqa: BLE001
+                pass
+
+
+class _PardisoLU:
+    """A numeric factorisation in one slot of an analysis (freed with this object)."""
+
+    single = False  # double precision always (see _pardiso_factorize)
+    K = None
+
+    def __init__(self, analysis: _Analysis, data):
+        self.analysis, self.data = analysis, np.ascontiguousarray(data, dtype=analysis.dtype)
+        self.slot = analysis.free.pop()
+        try:
+            analysis.call(self.slot, 22, self.data)
+        except BaseException:
+            analysis.free.append(self.slot)
+            self.slot = None
+            raise
+        perturbed, self._negative = int(analysis.iparm[13]), int(analysis.iparm[22])
+        # with perturbed pivots the factors are of a nearby matrix, and their inertia may not be K's
+        self.inertia_known = analysis.mtype == -2 and perturbed == 0
+        weakref.finalize(self, analysis.release, self.slot)
+
+    def negative_pivots(self) -> int | None:
+        return self._negative if self.inertia_known else None
+
+    def solve(self, b):
+        b = np.asarray(b)
+        return np.ascontiguousarray(self.analysis.call(self.slot, 33, self.data, b), dtype=float)
+
+
+_PATTERNS: list[_Pattern] = []
+
+
+def _threads() -> int:
+    """MKL's threads now: 1 in the methods' processes (:func:`casadi_ws.runtime.executor.one_blas_thread`,
+    workers), the cores otherwise. Results are bit-reproducible for a given count."""
+    _mkl()
+    return max(1, int(_LIB[1]()))
+
+
+def _analysis(pattern: _Pattern, symmetric: bool) -> _Analysis:
+    key = (symmetric, _threads())
+    a = pattern.analyses.get(key)
+    if a is None or not a.free:
+        a = pattern.analyses[key] = _Analysis(pattern, symmetric, MAX_FACTORS, key[1])
+    return a
+
+
+def _pardiso_factorize(K, reuse_ordering: bool, unsymmetric: bool = True):
+    """PARDISO's factorisation of K; None if K is unsymmetric and ``unsymmetric`` is False (``auto``: such a
+    K goes to SuperLU, whose diagonal pivots the stability test reads; PARDISO's LU has no inertia)."""
+    if not K.has_sorted_indices:
+        K = K.sorted_indices()
+    for pattern in _PATTERNS if reuse_ordering else ():
+        if pattern.matches(K):
+            break
+    else:
+        pattern = _Pattern(K)
+        if reuse_ordering:
+            _PATTERNS.insert(0, pattern)
+            del _PATTERNS[4:]
+    symmetric = pattern.symmetric(K.data)
+    if not (symmetric or unsymmetric):
+        return None
+    data = K.data[pattern.upper] if symmetric else K.data
+    if not reuse_ordering:  # a one-off matrix: its own analysis, freed with its factorisation
+        return _PardisoLU(_Analysis(pattern, symmetric, 1, _threads()), data)
+    # double precision always: PARDISO's single-precision L D L^T of a nearly incompressible (nu = 0.499) K
+    # passed the probe that SuperLU's failed (error 0.019), with two spurious negative pivots, and Newton
+    # stalled on it
+    return _PardisoLU(_analysis(pattern, symmetric), data)

@@ -1,0 +1,170 @@
+"""The linear solvers behind every factorisation (solvers/linear.py): each backend against the others and
+against dense linear algebra (solutions, inertia), their bookkeeping, and the problem file's choice.
+
+PARDISO comes with the test install (``make test`` installs the ``fast`` extra); SuperLU is always there.
+References are dense solves and dense eigenvalues of the same matrix, never an earlier output.
+"""
+
+import dataclasses
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from conftest import small_trunk
+from test_admissible import P_EULER, column
+
+import casadi_ws as cw
+import casadi_ws.solvers.linear as linear
+from casadi_ws.io.problem import ProblemError, SolverSettings
+from casadi_ws.solvers.admissible import admissibility
+from casadi_ws.solvers.linear import factorize
+
+pytestmark = pytest.mark.skipif(not linear.available("pardiso"),
+                                reason="PARDISO (pypardiso) not installed: make test installs it")
+SOLVERS = ["superlu", "pardiso"]
+
+
+def _symmetric(n=600, shift=0.0, seed=3):
+    A = sp.random(n, n, density=0.01, random_state=seed)
+    A = (A + A.T + 4.0 * sp.eye(n) - shift * sp.eye(n)).tocsc()
+    A.sort_indices()
+    return A
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+@pytest.mark.parametrize("single", [False, True])
+def test_solutions_match_a_dense_solve(solver, single):
+    A = _symmetric()
+    b = np.random.default_rng(0).standard_normal((A.shape[0], 3))
+    ref = np.linalg.solve(A.toarray(), b)
+    lu = factorize(A, single, solver=solver)
+    tol = 1e-4 if lu.single else 1e-10  # single precision (SuperLU): the caller refines against lu.K
+    assert np.linalg.norm(lu.solve(b) - ref) < tol * np.linalg.norm(ref)
+    assert np.linalg.norm(lu.solve(b[:, 0]) - ref[:, 0]) < tol * np.linalg.norm(ref[:, 0])
+    assert lu.single == (lu.K is not None)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_the_inertia_of_an_indefinite_symmetric_matrix(solver):
+    A = _symmetric(shift=3.0)
+    expected = int(np.count_nonzero(np.linalg.eigvalsh(A.toarray()) < 0))
+    assert 0 < expected < A.shape[0]
+    assert factorize(A, pivot_threshold=0.0, solver=solver).negative_pivots() == expected
+
+
+def test_an_unsymmetric_matrix_gets_an_lu_and_no_inertia():
+    A = _symmetric()
+    A = (A + sp.triu(A, 1).multiply(0.3)).tocsc()  # same pattern, unsymmetric values
+    A.sort_indices()
+    b = np.random.default_rng(1).standard_normal(A.shape[0])
+    lu = factorize(A, solver="pardiso")
+    assert np.linalg.norm(A @ lu.solve(b) - b) < 1e-10 * np.linalg.norm(b)
+    assert lu.negative_pivots() is None
+
+
+def test_more_live_factorisations_than_one_analysis_holds():
+    A = _symmetric(200)
+    b = np.ones(A.shape[0])
+    lus = [factorize(A * (1 + k), solver="pardiso") for k in range(linear.MAX_FACTORS + 3)]
+    for k in (0, linear.MAX_FACTORS - 1, linear.MAX_FACTORS + 2):
+        assert np.allclose((A * (1 + k)) @ lus[k].solve(b), b, atol=1e-10)
+    analysis = lus[0].analysis
+    del lus
+    assert len(analysis.free) == analysis.slots  # every slot released with its factorisation
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_the_pivots_count_the_negative_eigenvalues_of_a_column_above_euler(solver):
+    pb = column(3.0)
+    pb.solver = dataclasses.replace(pb.solver, linear=solver)
+    m = cw.StaticModel(pb)
+    eq = cw.solve_equilibrium(m, np.zeros(0))
+    adm = admissibility(m, eq.q, eq.u, eq.factorization)
+    K = m.residual_and_tangent(eq.q, eq.u)[1].toarray()
+    assert adm.negative_pivots == np.count_nonzero(np.linalg.eigvalsh(0.5 * (K + K.T)) < 0) == 2
+    assert not adm.stable and P_EULER > 0
+
+
+@pytest.mark.parametrize("factor, stable", [(0.9, True), (1.1, False)])
+def test_the_taylor_hood_columns_stability_is_the_same_with_both_solvers(factor, stable):
+    """A saddle-point tangent (pressure unknowns): its inertia from PARDISO's L D L^T and from SuperLU's
+    diagonal pivots, either side of Euler's load."""
+    for solver in SOLVERS:
+        pb = column(factor, "taylor_hood")
+        pb.solver = dataclasses.replace(pb.solver, linear=solver)
+        m = cw.StaticModel(pb)
+        eq = cw.solve_equilibrium(m, np.zeros(0))
+        assert eq.converged and linear.solver_of(m) == solver
+        assert admissibility(m, eq.q, eq.u, eq.factorization).stable is stable
+
+
+def test_the_trunks_equilibrium_is_the_same_with_both_solvers():
+    tips = {}
+    for solver in SOLVERS:
+        pb = small_trunk()
+        pb.solver = SolverSettings(linear=solver)
+        m = cw.StaticModel(pb)
+        eq = cw.solve_equilibrium(m, np.array([60.0, 30.0]))
+        assert eq.converged and linear.solver_of(m) == solver
+        tips[solver] = eq.tip
+    assert np.linalg.norm(tips["superlu"] - tips["pardiso"]) < 1e-9
+
+
+def test_auto_is_pardiso_for_a_symmetric_tangent_and_superlu_for_an_unsymmetric_one(monkeypatch):
+    """The 4-node corotational tangent is unsymmetric: ``auto`` keeps SuperLU there, whose pivots the
+    stability test reads; the 10-node one is symmetric, and gets PARDISO's L D L^T and its inertia."""
+    for order, backend in ((1, "_PermutedLU"), (2, "_PardisoLU")):
+        pb = small_trunk()
+        if order == 2:
+            from casadi_ws.fem.mesh import quadratic
+            pb.mesh = quadratic(pb.mesh)
+        m = cw.StaticModel(pb)
+        eq = cw.solve_equilibrium(m, np.array([60.0, 30.0]))
+        assert linear.solver_of(m) == "auto" and type(eq.factorization.lu).__name__ == backend
+        assert eq.factorization.negative_pivots() == 0
+    monkeypatch.setattr(linear, "available", lambda name: name != "pardiso")
+    assert linear.choose("auto") == "superlu"
+
+
+def test_the_problem_files_solver_linear(tmp_path, monkeypatch):
+    d = dict(cw.io.problem.DEFAULT_PROBLEM)
+    d["solver"] = {"linear": "superlu"}
+    assert cw.problem_from_dict(d, "p.yaml").solver.linear == "superlu"
+    d["solver"] = {"linear": "umfpack"}
+    with pytest.raises(ProblemError, match=r"^p\.yaml: solver\.linear: expected one of auto, superlu, pardiso"):
+        cw.problem_from_dict(d, "p.yaml")
+    import casadi_ws.io.problem as problem_module
+
+    monkeypatch.setattr(problem_module, "available", lambda name: name != "pardiso")
+    d["solver"] = {"linear": "pardiso"}
+    with pytest.raises(ProblemError, match=r"solver\.linear: pardiso is not installed here"):
+        cw.problem_from_dict(d, "p.yaml")
+
+
+def test_without_pypardiso_the_package_runs_on_superlu(tmp_path):
+    """A plain install (no ``fast`` extra): pypardiso cannot be imported, ``auto`` is SuperLU."""
+    block = tmp_path / "pypardiso.py"
+    block.write_text("raise ImportError('not installed')\n")
+    code = ("import numpy as np, casadi_ws as cw\n"
+            "from casadi_ws.solvers.linear import available\n"
+            "m = cw.StaticModel(cw.default_problem())\n"
+            "from casadi_ws.solvers.linear import solver_of\n"
+            "print(available('pardiso'), solver_of(m), cw.solve_equilibrium(m, np.array([10.0, 0.0])).converged)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
+                         env={**__import__("os").environ, "PYTHONPATH": str(tmp_path)}, timeout=300)
+    assert out.stdout.split() == ["False", "superlu", "True"], out.stderr[-2000:]
+
+
+def test_a_workers_history_does_not_change_a_factorisation():
+    """The analysis is computed from the pattern's fixed values, so the same K solves to the same bits
+    whichever tangent of the pattern was factorised first (a Dask task re-run in another worker)."""
+    A = _symmetric(300)
+    b = np.ones(A.shape[0])
+    out = []
+    for first in (A, A * 3.0 + sp.eye(A.shape[0]) * 7.0):
+        linear._PATTERNS.clear()
+        factorize(first.tocsc(), solver="pardiso")
+        out.append(factorize(A, solver="pardiso").solve(b))
+    np.testing.assert_array_equal(out[0], out[1])
