@@ -1,0 +1,189 @@
+"""The linear solvers (solvers/linear.py) at the sizes users have: factorisations, one equilibrium, and
+forward-backward, SuperLU against PARDISO in the same run.
+
+    python scripts/bench_linear.py                 # everything (~30 min on 2 cores), then BENCHMARKS.md
+    python scripts/bench_linear.py --only fact     # one part: fact | eq | fb | fine
+    python scripts/bench_linear.py --write         # BENCHMARKS.md's section from results/bench_linear.json
+
+Meshes: the shipped 2-cable trunk with linear tetrahedra (resolution 1.0: 2646 free dofs) and with 10-node
+ones at resolution 0.5 (4374), 1.0 (18252: problems/trunk_2cables_fine.yaml) and 1.5 (~52k, factorisation
+only). Each scenario runs in a fresh process, so that its peak memory (the process and its workers,
+ru_maxrss) is its own.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+from benchlib import machine, write_section
+
+REPO = Path(__file__).resolve().parents[1]
+OUT = REPO / "results" / "bench_linear.json"
+U = np.array([40.0, 20.0])
+MESHES = {"linear, res 1.0": (1, 1.0), "10-node, res 0.5": (2, 0.5), "10-node, res 1.0": (2, 1.0),
+          "10-node, res 1.5": (2, 1.5)}
+FB_PROBLEMS = ["trunk_2cables_order2"]  # symmetric K; the 4-node trunks' unsymmetric K stays on SuperLU (auto)
+
+
+def _problem(name=None, order=None, res=None, linear="auto"):
+    from casadi_ws.io.problem import problem_from_dict
+
+    d = yaml.safe_load((REPO / "problems" / f"{name or 'trunk_2cables'}.yaml").read_text())
+    if order is not None:
+        d["mesh"] = {**d["mesh"], "resolution": res, "order": order}
+    d["solver"] = {**(d.get("solver") or {}), "linear": linear}
+    return problem_from_dict(d, f"{name} {order} {res}")
+
+
+def _peak_mb() -> float:
+    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    return max(own, kids) / 1024
+
+
+def fact(mesh: str) -> dict:
+    """K at the equilibrium at U, factorised by each backend and precision, with 1 and 2 threads."""
+    from threadpoolctl import threadpool_limits
+
+    from casadi_ws import StaticModel, solve_equilibrium
+    from casadi_ws.solvers.linear import factorize
+
+    m = StaticModel(_problem(None, *MESHES[mesh], linear="pardiso"))
+    eq = solve_equilibrium(m, U)
+    K = m.residual_and_tangent(eq.q, eq.u)[1].tocsc()
+    b = np.random.default_rng(0).standard_normal(K.shape[0])
+    row = {"dofs": int(K.shape[0]), "nnz": int(K.nnz)}
+    for solver in ("superlu", "pardiso"):
+        for single in (True, False):
+            for threads in ((1,) if solver == "superlu" else (1, 2)):
+                if solver == "superlu" and K.shape[0] > 30000 and not single:
+                    continue  # minutes per factorisation: the single-precision row says enough
+                with threadpool_limits(threads, user_api="blas"):
+                    factorize(K, single, solver=solver)  # the ordering / analysis of the pattern, once
+                    times = []
+                    for _ in range(2 if K.shape[0] > 30000 else 3):
+                        t = time.perf_counter()
+                        lu = factorize(K, single, solver=solver)
+                        times.append(time.perf_counter() - t)
+                    t = time.perf_counter()
+                    x = lu.solve(b)
+                    ts = time.perf_counter() - t
+                key = f"{solver} {'single' if single else 'double'} {threads}t"
+                row[key] = {"factorise": min(times), "solve": ts,
+                            "error": float(np.linalg.norm(K @ x - b) / np.linalg.norm(b))}
+                del lu
+    row["peak_mb"] = _peak_mb()
+    return row
+
+
+def eq(mesh: str, solver: str) -> dict:
+    """One equilibrium from rest at U (the issue's measurement), kernels compiled beforehand."""
+    from casadi_ws import StaticModel, solve_equilibrium
+
+    m = StaticModel(_problem(None, *MESHES[mesh], linear=solver))
+    solve_equilibrium(m, np.array([1.0, 1.0]))  # first factorisation of the pattern: ordering / analysis
+    t = time.perf_counter()
+    e = solve_equilibrium(m, U)
+    return {"time": time.perf_counter() - t, "iterations": e.iterations, "lus": e.factorizations,
+            "converged": bool(e.converged), "dofs": int(m.n_free), "peak_mb": _peak_mb()}
+
+
+def fb(name: str, solver: str) -> dict:
+    from casadi_ws import StaticModel
+    from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
+
+    pb = _problem(name, linear=solver)
+    m = StaticModel(pb)
+    t = time.perf_counter()
+    r = forward_backward(pb, FBSettings(progress=False, workers=2), model=m)
+    dt = time.perf_counter() - t
+    return {"time": dt, "cells": int(len(r.points)), "dofs": int(m.n_free), "peak_mb": _peak_mb(),
+            "counters": {k: v for k, v in r.counters.items() if isinstance(v, (int, float))}}
+
+
+def _run_one(args) -> dict:
+    out = subprocess.run([sys.executable, __file__, "--one", json.dumps(args)], capture_output=True, text=True,
+                         cwd=REPO)
+    if out.returncode != 0:
+        raise RuntimeError(out.stderr[-3000:])
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def run(only: str | None) -> dict:
+    res = json.loads(OUT.read_text()) if OUT.exists() else {}
+    res["machine"] = machine()
+    if only in (None, "fact"):
+        res["fact"] = {k: _run_one(["fact", k]) for k in MESHES}
+    if only in (None, "eq"):
+        res["eq"] = {f"{k} {s}": _run_one(["eq", k, s]) for k in list(MESHES)[:3] for s in ("superlu", "auto")}
+    if only in (None, "fb"):
+        res["fb"] = {f"{p} {s}": _run_one(["fb", p, s]) for p in FB_PROBLEMS for s in ("superlu", "auto")}
+    if only in (None, "fine"):
+        res["fine"] = {"trunk_2cables_fine auto": _run_one(["fb", "trunk_2cables_fine", "auto"])}
+    OUT.parent.mkdir(exist_ok=True)
+    OUT.write_text(json.dumps(res, indent=1))
+    return res
+
+
+def write(res: dict) -> None:
+    lines = [f"{res['machine']}; `scripts/bench_linear.py`, one fresh process per row (peak memory: the process and "
+             "its workers). K is the tangent at the equilibrium at u = (40, 20) N of the 2-cable trunk "
+             "(corotational: its K is symmetric to 1e-16, so PARDISO factorises it as symmetric indefinite).", "",
+             "Factorisation of K (best of 3; the ordering / analysis of the pattern excluded: it is done once per "
+             "model), and the solve error ||K x - b|| / ||b|| (single precision: before the refinement Newton "
+             "and the sensitivities do):", "",
+             "| mesh | dofs | nnz(K) | SuperLU single | SuperLU double | PARDISO single 1 / 2 threads | "
+             "PARDISO double 1 / 2 threads | peak memory |", "|---|---|---|---|---|---|---|---|"]
+    for k, r in res.get("fact", {}).items():
+        def ms(key):
+            return f"{1e3 * r[key]['factorise']:.0f} ms" if key in r else "—"
+        lines.append(f"| {k} | {r['dofs']} | {r['nnz'] / 1e6:.2f} M | {ms('superlu single 1t')} | "
+                     f"{ms('superlu double 1t')} | {ms('pardiso single 1t')} / {ms('pardiso single 2t')} | "
+                     f"{ms('pardiso double 1t')} / {ms('pardiso double 2t')} | {r['peak_mb']:.0f} MB |")
+    lines += ["", "One equilibrium from rest at u = (40, 20) N (Newton; 2 threads for PARDISO and the element "
+              "kernels). `auto` is PARDISO for the 10-node trunks' symmetric K and SuperLU for the 4-node trunk's "
+              "unsymmetric one:", "", "| mesh | dofs | SuperLU: time, its / LUs | auto: time, its / LUs | ratio |",
+              "|---|---|---|---|---|"]
+    eqs = res.get("eq", {})
+    for k in MESHES:
+        a, b = eqs.get(f"{k} superlu"), eqs.get(f"{k} auto")
+        if a and b:
+            lines.append(f"| {k} | {a['dofs']} | {a['time']:.2f} s, {a['iterations']} / {a['lus']} | "
+                         f"{b['time']:.2f} s, {b['iterations']} / {b['lus']} | {a['time'] / b['time']:.1f}x |")
+    lines += ["", "Forward-backward at the default step, 2 worker processes (one thread each):", "",
+              "| problem | dofs | SuperLU: time, cells | auto: time, cells | ratio | peak memory (auto) |",
+              "|---|---|---|---|---|---|"]
+    fbs = res.get("fb", {})
+    for p in FB_PROBLEMS:
+        a, b = fbs.get(f"{p} superlu"), fbs.get(f"{p} auto")
+        if a and b:
+            lines.append(f"| {p} | {a['dofs']} | {a['time']:.1f} s, {a['cells']} | {b['time']:.1f} s, {b['cells']} | "
+                         f"{a['time'] / b['time']:.1f}x | {b['peak_mb']:.0f} MB |")
+    for k, r in res.get("fine", {}).items():
+        lines.append(f"| trunk_2cables_fine | {r['dofs']} | — | {r['time']:.1f} s, {r['cells']} | — | "
+                     f"{r['peak_mb']:.0f} MB |")
+    write_section("linear", "## Linear solvers (issue: accurate models at interactive speed) — "
+                  "`scripts/bench_linear.py`\n\n" + "\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", choices=["fact", "eq", "fb", "fine"])
+    ap.add_argument("--write", action="store_true")
+    ap.add_argument("--one", help=argparse.SUPPRESS)
+    a = ap.parse_args()
+    if a.one:
+        kind, *rest = json.loads(a.one)
+        print(json.dumps({"fact": fact, "eq": eq, "fb": fb}[kind](*rest)))
+    elif a.write:
+        write(json.loads(OUT.read_text()))
+    else:
+        write(run(a.only))
