@@ -1,6 +1,7 @@
 """Does forward-backward find every cell the forward cloud occupies? Strict recall on the FB grid, and cost.
 
     python scripts/bench_fb_recall.py [--problems trunk_2cables trunk_3cables ...] [--workers 2] [--step 0.004]
+    python scripts/bench_fb_recall.py --problems trunk_2cables_fine --nd 41 --section fb-recall-fine
 
 For each problem, the forward cloud at the n_d of issue 13 (2 cables: 100, 3: 30, 4: 12; cached under
 results/bench_cache/, since it takes minutes) and the forward-backward result with default settings. Records
@@ -39,11 +40,12 @@ def main():
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--step", type=float, default=0.004)
     ap.add_argument("--section", default="fb-recall")
+    ap.add_argument("--nd", type=int, help="the forward cloud's n_d (default: 100 / 30 / 12 for 2 / 3 / 4 inputs)")
     args = ap.parse_args()
     rows = []
     for name in args.problems:
         pb = cw.load_problem(ROOT / "problems" / f"{name}.yaml")
-        n_d = ND[pb.n_u]
+        n_d = args.nd or ND[pb.n_u]
         t = time.perf_counter()
         fw = forward_cloud(name, pb, n_d, args.workers)
         t_fw = time.perf_counter() - t

@@ -34,7 +34,8 @@ from ..solvers.sensitivity import sensitivity
 from .maps import MAPS, point_maps, state_maps
 from .result import WorkspaceResult, describe
 
-__all__ = ["ForwardSettings", "forward", "input_grid", "lagrange_weights", "line_stride", "snake_order", "sweep"]
+__all__ = ["ForwardSettings", "across_stride", "forward", "input_grid", "lagrange_weights", "line_stride",
+           "snake_order", "sweep"]
 
 
 @dataclass
@@ -68,6 +69,13 @@ class ForwardSettings:
     the polynomial through the nearest (up to 8) solved points of the line, accepted if their residual passes
     the same check, else solved by Newton from there. 1: Newton everywhere. Default: n_d // 12, clamped to
     [1, 8] (so the solved points stay ~8 % of the range apart)."""
+    across: int | None = None
+    """With three or more actuators, the grid lines of a plane (the last two actuators varying) are solved
+    as above only every ``across``-th line (and the last); the points of the lines between are the
+    polynomial across lines through the nearest (up to 8) solved lines' points at the same input, accepted
+    on the same check, else solved by Newton from there. They inherit stability and self-penetration from
+    the solved lines either side when both pass those. 1: every line solved. Default: as ``stride`` with
+    three or more actuators, 1 with two (their sweep is already ~16 % Newton points at n_d = 100)."""
 
 
 def snake_order(n_d: int, n_u: int) -> np.ndarray:
@@ -214,6 +222,23 @@ def line_stride(settings, line_length: int) -> int:
     return int(np.clip(line_length // 12, 1, 8))
 
 
+def across_stride(settings, n_u: int, n_lines: int) -> int:
+    """Lines between the Newton-solved lines of a plane (see :attr:`ForwardSettings.across`)."""
+    if settings.across is not None:
+        return max(1, int(settings.across))
+    return line_stride(settings, n_lines) if n_u >= 3 else 1
+
+
+def _grid_positions(n: int, stride: int, reverse: bool) -> list[int]:
+    """Every stride-th of n positions and the last (and half a stride in from each end where the stride is 4
+    or more: there the stencil is one-sided, which interpolates less well), mirrored when the sweep runs
+    backwards, so that the solved positions are the same inputs whichever way it runs."""
+    grid = set(range(0, n, stride)) | {n - 1}
+    if stride >= 4:
+        grid |= {stride // 2, n - 1 - stride // 2}
+    return sorted(n - 1 - g for g in grid) if reverse else sorted(grid)
+
+
 def _solve_line(model, us, first, settings, tol, sw: _Sweep, counters):
     """Solve the points of one grid line (in sweep order, the line's actuator varying): every stride-th by
     Newton, the others by interpolating those and verifying the residual (Newton where that fails)."""
@@ -221,11 +246,7 @@ def _solve_line(model, us, first, settings, tol, sw: _Sweep, counters):
     stride = line_stride(settings, n) if n > 2 else 1
     # Newton at the same grid positions on every line (whichever way it runs), so their first iterates can
     # be extrapolated across the previous lines, one grid step apart
-    grid = set(range(0, n, stride)) | {n - 1}
-    if stride >= 4:  # near the ends the stencil is one-sided, which interpolates less well: halve the gap
-        grid |= {stride // 2, n - 1 - stride // 2}
-    reverse = n > 1 and np.any(us[-1] < us[0])
-    newton = sorted(n - 1 - g for g in grid) if reverse else sorted(grid)
+    newton = _grid_positions(n, stride, n > 1 and bool(np.any(us[-1] < us[0])))
     out = [None] * n
     for j in newton:
         out[j] = _solve_point(model, us[j], first + j, settings, tol, sw, counters)
@@ -300,6 +321,83 @@ def _check_line(model, line) -> tuple[np.ndarray, np.ndarray]:
     return masks, maps
 
 
+def _solve_plane(model, us, first, settings, tol, sw: _Sweep, counters, L: int):
+    """A plane of grid lines (the last two actuators varying; ``L`` points per line, in sweep order): every
+    ``across``-th line solved by :func:`_solve_line`, the lines between interpolated across lines and
+    verified. Returns the equilibria, admissibility masks and maps of its points."""
+    lines = [np.arange(a, min(a + L, len(us))) for a in range(0, len(us), L)]
+    ax, lax = model.n_u - 2, model.n_u - 1
+    x = np.array([us[idx[0], ax] for idx in lines])
+    newton = _grid_positions(len(lines), across_stride(settings, model.n_u, len(lines)),
+                             len(lines) > 1 and bool(x[-1] < x[0]))
+    eqs = [None] * len(us)
+    masks = np.zeros(len(us), dtype=np.int64)
+    maps = np.full((len(us), len(MAPS) + 2 * model.n_u), np.nan)
+    at = {}  # (Newton line, input of the line's actuator) -> index of the point
+    for i in newton:
+        idx = lines[i]
+        line = _solve_line(model, us[idx], first + idx[0], settings, tol, sw, counters)
+        masks[idx], maps[idx] = _check_line(model, line)
+        for j, eq in zip(idx, line):
+            eqs[j] = eq
+            if eq.status == CONVERGED:
+                at[i, float(us[j, lax])] = j
+    for i in sorted(set(range(len(lines))) - set(newton)):
+        for j in lines[i]:
+            nodes = [(k, at[k, float(us[j, lax])]) for k in newton if (k, float(us[j, lax])) in at]
+            eqs[j], masks[j], maps[j] = _across(model, us[j], x[i], [(x[k], n) for k, n in nodes], eqs, masks, maps,
+                                                settings, tol, counters)
+    return eqs, masks, maps
+
+
+def _across(model, u, x, nodes, eqs, masks, maps, settings, tol, counters):
+    """One point between Newton lines, at ``x`` on the across axis: the polynomial through the nearest
+    ``nodes`` [(x_k, point index)], verified (Newton from it otherwise); then its checks and maps."""
+    if not nodes:
+        eq = solve_equilibrium(model, u, tol=tol, max_iter=settings.max_iter)
+        _count(counters, eq)
+        eq.newton = True
+        return eq, *_own_checks(model, eq)
+    nodes = sorted(nodes, key=lambda n: abs(n[0] - x))[:_INTERPOLATION_POINTS]
+    xs = np.array([n[0] for n in nodes])
+    guess = sum(w * eqs[k].q for w, (_, k) in zip(lagrange_weights(xs, x), nodes))
+    eq = verify(model, u, guess, tol)
+    counters["interpolated"] += 1
+    if eq.status != CONVERGED:
+        counters["interpolation_failed"] += 1
+        k = nodes[0][1]
+        eq = solve_equilibrium(model, u, q0=eqs[k].q, u0=eqs[k].u, guess=guess, tol=tol, max_iter=settings.max_iter)
+        _count(counters, eq)
+        eq.newton = True
+        return eq, *_own_checks(model, eq)
+    # the solved lines either side (or the nearest one, at the plane's edge) stand in for its costly checks
+    lo = [n for n in nodes if n[0] < x]
+    hi = [n for n in nodes if n[0] > x]
+    a = min(lo, key=lambda n: x - n[0]) if lo else None
+    b = min(hi, key=lambda n: n[0] - x) if hi else None
+    costly = encode(("unstable", "self_penetration"))
+    inherit = a is not None and b is not None and not (masks[a[1]] | masks[b[1]]) & costly
+    mask = admissibility(model, eq.q, eq.u, None, inherited=bool(inherit)).mask
+    m = state_maps(model, eq.q, eq.u)
+    row = np.array([m.get(name, np.nan) for name in MAPS] + list(m["states"]) + list(m["intensities"]))
+    a, b = a or b, b or a
+    w = 0.0 if a[0] == b[0] else (x - a[0]) / (b[0] - a[0])
+    lu_maps = [MAPS.index("steerability"), MAPS.index("compliance")]
+    row[lu_maps] = (1 - w) * maps[a[1], lu_maps] + w * maps[b[1], lu_maps]
+    return eq, mask, row
+
+
+def _own_checks(model, eq):
+    """Admissibility mask and maps of a Newton-solved point, from its own LU."""
+    row = np.full(len(MAPS) + 2 * model.n_u, np.nan)
+    if eq.status != CONVERGED:
+        return 0, row
+    fac = eq.factorization if eq.factorization is not None else tangent_factorization(model, eq.q, eq.u)
+    mask = admissibility(model, eq.q, eq.u, fac).mask
+    m = point_maps(model, eq.q, eq.u, sensitivity(model, eq.q, fac)[0], fac)
+    return mask, np.array([m[name] for name in MAPS] + list(m["states"]) + list(m["intensities"]))
+
+
 def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progress=None,
            resume: dict | None = None, checkpoint=None, line_length: int | None = None):
     """Solve the equilibria at ``us`` (whole grid lines of ``line_length`` points, default n_d, in sweep
@@ -352,17 +450,24 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
 
     last_save = time.perf_counter()
     done = first  # points whose results, history and counters are all recorded
+    # the unit of work (and of checkpoints): a plane of lines where lines are interpolated across, else a line
+    P = L * L if model.n_u >= 2 and across_stride(settings, model.n_u, L) > 1 else L
     try:
         with deferred_interrupt() as ctrl_c:
-            for a in range(first, n, L):
-                b = min(a + L, n)
+            for a in range(first, n, P):
+                b = min(a + P, n)
                 snapshot = (list(sw.history), sw.fac, sw.start, dict(counters))
                 try:
-                    line = _solve_line(model, us[a:b], a, settings, tol, sw, counters)
+                    if P > L:
+                        line, violations[a:b], maps[a:b] = _solve_plane(model, us[a:b], a, settings, tol, sw,
+                                                                         counters, L)
+                    else:
+                        line = _solve_line(model, us[a:b], a, settings, tol, sw, counters)
                 except KeyboardInterrupt:  # a second Ctrl-C mid-line: forget it, it is solved again on resume
                     sw.history, sw.fac, sw.start, counters = snapshot
                     raise
-                violations[a:b], maps[a:b] = _check_line(model, line)
+                if P == L:
+                    violations[a:b], maps[a:b] = _check_line(model, line)
                 for j, eq in enumerate(line, start=a):
                     tips[j], status[j], residual[j] = eq.tip, eq.status, eq.residual
                     if states is not None and eq.status == CONVERGED:
@@ -420,7 +525,7 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
     workers = max(1, min(int(workers), n // 50 or 1))
     fp = fingerprint("forward", model, {k: getattr(settings, k) for k in
                                         ("n_d", "predictor", "reuse_factorization", "krylov", "tol", "max_iter",
-                                         "store_states", "stride")} | {"workers": workers, "format": 5})
+                                         "store_states", "stride", "across")} | {"workers": workers, "format": 6})
     run = RunState(checkpoint_dir, "forward", fp, resume, t0)
     try:
         if workers == 1:
@@ -473,11 +578,13 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
 
 def _parallel(problem, us, settings, workers, bar, run: RunState, executor: Executor):
     """Slices of whole grid lines, several per worker; each completed slice is checkpointed."""
-    n_lines = max(1, len(us) // settings.n_d)
     L = settings.n_d
+    # whole planes where lines are interpolated across them (see sweep), else whole lines
+    unit = L * L if problem.n_u >= 2 and across_stride(settings, problem.n_u, L) > 1 else L
+    n_units = max(1, len(us) // unit)
     # two pieces per worker: each starts cold (~1 s of continuation from rest), so more cost more
-    pieces = [np.arange(lines[0] * L, (lines[-1] + 1) * L)
-              for lines in np.array_split(np.arange(n_lines), min(n_lines, 2 * workers))]
+    pieces = [np.arange(units[0] * unit, (units[-1] + 1) * unit)
+              for units in np.array_split(np.arange(n_units), min(n_units, 2 * workers))]
     results = [None] * len(pieces)
     if run.saved is not None:
         saved_meta, saved = run.saved
