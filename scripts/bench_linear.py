@@ -178,7 +178,11 @@ def write(res: dict) -> None:
     lines += ["", "Per reached cell (2 workers): " + "; ".join(per_cell) + ". Where the time goes in the 18k-dof FB "
               "(py-spy, one worker, 20 s): PARDISO's numeric factorisations 42 %, the tangent's element kernels 35 % "
               "(one thread per worker), solves 14 %; 36 % of the time is in backward solves that needed load "
-              "continuation. The factorisation is no longer the only cost: fewer Newton steps per cell are next."]
+              "continuation. The factorisation is no longer the only cost: fewer Newton steps per cell are next.",
+              "", "Caveat of the 2026-12-02 run: the factorisation rows and the 4-node equilibrium row ran while "
+              "another test loaded the machine. On the 4-node trunk `auto` is SuperLU, and its dispatch (the "
+              "symmetry test) costs ~1.5 ms per factorisation (profiled, 20 factorisations), not the 0.6 s the "
+              "table shows."]
     write_section("linear", "## Linear solvers (issue: accurate models at interactive speed) — "
                   "`scripts/bench_linear.py`\n\n" + "\n".join(lines) + "\n")
 
