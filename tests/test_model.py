@@ -66,6 +66,29 @@ def test_compiled_and_interpreted_kernels_agree(model, rng):
     np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max())
 
 
+@pytest.mark.parametrize("kernel, params", [
+    ("corotational", [2e5, 1.8e6]), ("neohookean", [2e5, 1.8e6]), ("yeoh", [1e5, 2e4, -3e2, 2e6]),
+    ("ogden2", [1.6e5, 3e3, 1.3, 5.0, 2e6]), ("yeoh_mixed", [1e5, 2e4, -3e2, 2e6]),
+    ("mooney_rivlin_iso", [1.2e5, 3e4, 2e6])])
+def test_the_stiffness_built_per_quadrature_point_is_the_jacobian_of_the_forces(kernel, params, rng):
+    """The 10-node kernels assemble K_e from the stress's 9 x 9 tangent at each point: the same matrix as
+    differentiating the element's forces whole, which is what they did before (2.6x the work)."""
+    import casadi as ca
+
+    from casadi_ws.fem.elements import TET10
+
+    fs = element_functions(kernel, TET10, hessian=False)
+    X = TET10.ref_nodes[None] * 0.01 + rng.normal(size=(3, 10, 3)) * 5e-4
+    w, G = TET10.rest_geometry(X)
+    args = [rng.normal(size=30) * 1e-3, (X[0] - X[0, 0]).reshape(-1), G[0].reshape(-1),
+            np.concatenate([w[0], params])]
+    sym = [ca.SX.sym(n, fs["force"].numel_in(i)) for i, n in enumerate("uXGp")]
+    whole = ca.Function("whole", sym, [ca.jacobian(fs["force"](*sym), sym[0])])
+    K_ref = np.asarray(whole(*args)).reshape(30, 30)
+    K = np.asarray(fs["stiffness"](*args)).reshape(30, 30, order="F")
+    assert np.abs(K - K_ref).max() < 1e-12 * np.abs(K_ref).max()
+
+
 def _patch_problem(model, order=1):
     mesh = box_mesh((1.0, 1.0, 1.0), (3, 3, 3) if order == 1 else (2, 2, 2))
     if order == 2:
