@@ -175,14 +175,16 @@ def write(res: dict) -> None:
     fb = {**res.get("fb", {}), **res.get("fine", {})}
     per_cell = [f"{k.split()[0]} ({k.split()[1]}): {r['counters'].get('factorizations', 0) / max(r['cells'], 1):.2f} "
                 f"LUs and {r['time'] / max(r['cells'], 1):.2f} s per reached cell" for k, r in fb.items()]
-    lines += ["", "Per reached cell (2 workers): " + "; ".join(per_cell) + ". Where the time goes in the 18k-dof FB "
-              "(py-spy, one worker, 20 s): PARDISO's numeric factorisations 42 %, the tangent's element kernels 35 % "
-              "(one thread per worker), solves 14 %; 36 % of the time is in backward solves that needed load "
-              "continuation. The factorisation is no longer the only cost: fewer Newton steps per cell are next.",
-              "", "Caveat of the 2026-12-02 run: the factorisation rows and the 4-node equilibrium row ran while "
-              "another test loaded the machine. On the 4-node trunk `auto` is SuperLU, and its dispatch (the "
-              "symmetry test) costs ~1.5 ms per factorisation (profiled, 20 factorisations), not the 0.6 s the "
-              "table shows."]
+    lines += ["", "Per reached cell (2 workers): " + "; ".join(per_cell) + ".",
+              "", "Where the time went (py-spy, `trunk_2cables_order2` FB in one process, 2026-12-02): before the "
+              "stiffness was built per quadrature point, element kernels 45 %, PARDISO factorisations 22 %, "
+              "solves 15 % (181 s under the profiler); after it, factorisations 28 %, kernels 31 % (of which "
+              "the tangent refined at each answer, 13 %), solves 19 % (147 s under the profiler, 144 s without, "
+              "the same 965 cells and 1591 LUs). The 18k-dof FB had PARDISO 42 %, kernels 35 % before it.",
+              "", "This run (2026-12-02 evening) had the machine to itself; the run of the same morning, which "
+              "this section replaces, shared it with a test (its rows were 1.5-3x slower: 18k-dof equilibrium "
+              "10.3 s, FB 1370 s and 221 s). The ratio of the kernel change alone is the one-process profile "
+              "above (~1.25x on the 4374-dof FB); the rest of the difference is the load."]
     write_section("linear", "## Linear solvers (issue: accurate models at interactive speed) — "
                   "`scripts/bench_linear.py`\n\n" + "\n".join(lines) + "\n")
 
