@@ -342,7 +342,7 @@ def _stiffness_by_quadrature_point(stress, u, Gs, ws, *params):
     The same matrix as the Jacobian of the element's forces, to round-off, at a fraction of the work: the
     9 x 9 tangent of the stress is differentiated once per point, and B_k is sparse. Differentiating the
     30 forces through the polar iteration instead cost 33 us per corotational 10-node element, this 13 us
-    (tests/test_materials.py compares the two)."""
+    (tests/test_model.py compares the two)."""
     Fv = ca.SX.sym("F", 9)
     ps = [ca.SX.sym(f"p{i}") for i in range(len(params))]
     dP = ca.Function("dP", [Fv, *ps], [ca.jacobian(ca.vec(stress(ca.reshape(Fv, 3, 3), *ps)), Fv)])
