@@ -338,6 +338,10 @@ def _solve_plane(model, us, first, settings, tol, sw: _Sweep, counters, L: int):
         idx = lines[i]
         line = _solve_line(model, us[idx], first + idx[0], settings, tol, sw, counters)
         masks[idx], maps[idx] = _check_line(model, line)
+        for eq in line:
+            # checked: the lines between need only its states; a plane's ~250 LUs kept to its end took 12 GB
+            # per worker on the 3-cable trunk at n_d = 30
+            eq.factorization = None
         for j, eq in zip(idx, line):
             eqs[j] = eq
             if eq.status == CONVERGED:
