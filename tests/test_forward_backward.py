@@ -203,6 +203,18 @@ def test_nonlinear_trunk_fb_agrees_with_forward_and_its_points_are_equilibria(tm
     assert pv.read(tmp_path / "cells.vtu").n_cells == fb.n_points
 
 
+def test_the_linear_predictor_reaches_the_same_cells_with_more_lus():
+    """``second_order=False`` (no curvature Q per reached cell) changes the cost, not the workspace."""
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    second = forward_backward(pb, FBSettings(step=0.005, progress=False), model=m)
+    first = forward_backward(pb, FBSettings(step=0.005, progress=False, backward=BackwardSettings(second_order=False)),
+                             model=m)
+    a, b = ({tuple(c) for c in r.arrays["cells"]} for r in (second, first))
+    assert len(a ^ b) <= 0.02 * len(a)
+    assert first.counters["factorizations_per_cell"] > 1.3 * second.counters["factorizations_per_cell"]
+
+
 def test_unreachable_target_is_not_reached():
     pb = small_trunk("corotational", n_cables=2)
     m = StaticModel(pb)

@@ -58,6 +58,12 @@ class BackwardSettings:
     the workspace needs a point of the cell, and the part of the cell that is reachable is not near its
     centre. 0.4 leaves a tenth of a cell for the linearisation's error. None: the centre only (problem (8)
     as the publication states it)."""
+    second_order: bool = True
+    """Reduced, in the forward-backward method: predict each backward solve's first equilibrium to second order,
+    with the curvature Q = d2q/du2 of the configuration it starts from
+    (:func:`casadi_ws.solvers.sensitivity.curvature`: n_u(n_u + 1) residuals and a solve with n_u(n_u + 1)/2
+    right-hand sides per reached cell), so that its Newton solve needs one LU. False: the linear predictor
+    q + S du, whose Newton solve then needs a second LU where the body rotates (BENCHMARKS.md, "second-order")."""
     give_up: float | None = None
     """Reduced: stop (status 3) when, from the second iterate on, the linearised closest point (the bounded
     least-squares step's prediction) lies more than (0.5 + give_up) steps from the target in some
