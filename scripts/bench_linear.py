@@ -15,15 +15,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
-import yaml
-from benchlib import machine, write_section
+from benchlib import machine, peak_mb, run_in_fresh_process, trunk_variant, write_section
 
 REPO = Path(__file__).resolve().parents[1]
 OUT = REPO / "results" / "bench_linear.json"
@@ -33,22 +29,6 @@ MESHES = {"linear, res 1.0": (1, 1.0), "10-node, res 0.5": (2, 0.5), "10-node, r
 FB_PROBLEMS = ["trunk_2cables_order2"]  # symmetric K; the 4-node trunks' unsymmetric K stays on SuperLU (auto)
 
 
-def _problem(name=None, order=None, res=None, linear="auto"):
-    from casadi_ws.io.problem import problem_from_dict
-
-    d = yaml.safe_load((REPO / "problems" / f"{name or 'trunk_2cables'}.yaml").read_text())
-    if order is not None:
-        d["mesh"] = {**d["mesh"], "resolution": res, "order": order}
-    d["solver"] = {**(d.get("solver") or {}), "linear": linear}
-    return problem_from_dict(d, f"{name} {order} {res}")
-
-
-def _peak_mb() -> float:
-    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    return max(own, kids) / 1024
-
-
 def fact(mesh: str) -> dict:
     """K at the equilibrium at U, factorised by each backend and precision, with 1 and 2 threads."""
     from threadpoolctl import threadpool_limits
@@ -56,7 +36,7 @@ def fact(mesh: str) -> dict:
     from casadi_ws import StaticModel, solve_equilibrium
     from casadi_ws.solvers.linear import factorize
 
-    m = StaticModel(_problem(None, *MESHES[mesh], linear="pardiso"))
+    m = StaticModel(trunk_variant(None, *MESHES[mesh], linear="pardiso"))
     eq = solve_equilibrium(m, U)
     K = m.residual_and_tangent(eq.q, eq.u)[1].tocsc()
     b = np.random.default_rng(0).standard_normal(K.shape[0])
@@ -80,7 +60,7 @@ def fact(mesh: str) -> dict:
                 row[key] = {"factorise": min(times), "solve": ts,
                             "error": float(np.linalg.norm(K @ x - b) / np.linalg.norm(b))}
                 del lu
-    row["peak_mb"] = _peak_mb()
+    row["peak_mb"] = peak_mb()
     return row
 
 
@@ -88,33 +68,29 @@ def eq(mesh: str, solver: str) -> dict:
     """One equilibrium from rest at U (the issue's measurement), kernels compiled beforehand."""
     from casadi_ws import StaticModel, solve_equilibrium
 
-    m = StaticModel(_problem(None, *MESHES[mesh], linear=solver))
+    m = StaticModel(trunk_variant(None, *MESHES[mesh], linear=solver))
     solve_equilibrium(m, np.array([1.0, 1.0]))  # first factorisation of the pattern: ordering / analysis
     t = time.perf_counter()
     e = solve_equilibrium(m, U)
     return {"time": time.perf_counter() - t, "iterations": e.iterations, "lus": e.factorizations,
-            "converged": bool(e.converged), "dofs": int(m.n_free), "peak_mb": _peak_mb()}
+            "converged": bool(e.converged), "dofs": int(m.n_free), "peak_mb": peak_mb()}
 
 
 def fb(name: str, solver: str) -> dict:
     from casadi_ws import StaticModel
     from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
 
-    pb = _problem(name, linear=solver)
+    pb = trunk_variant(name, linear=solver)
     m = StaticModel(pb)
     t = time.perf_counter()
     r = forward_backward(pb, FBSettings(progress=False, workers=2), model=m)
     dt = time.perf_counter() - t
-    return {"time": dt, "cells": int(len(r.points)), "dofs": int(m.n_free), "peak_mb": _peak_mb(),
+    return {"time": dt, "cells": int(len(r.points)), "dofs": int(m.n_free), "peak_mb": peak_mb(),
             "counters": {k: v for k, v in r.counters.items() if isinstance(v, (int, float))}}
 
 
 def _run_one(args) -> dict:
-    out = subprocess.run([sys.executable, __file__, "--one", json.dumps(args)], capture_output=True, text=True,
-                         cwd=REPO)
-    if out.returncode != 0:
-        raise RuntimeError(out.stderr[-3000:])
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    return run_in_fresh_process(__file__, args)
 
 
 def run(only: str | None) -> dict:

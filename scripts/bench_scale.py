@@ -20,15 +20,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
-import yaml
-from benchlib import machine, write_section
+from benchlib import machine, peak_mb, run_in_fresh_process, trunk_variant, write_section
 
 REPO = Path(__file__).resolve().parents[1]
 OUT = REPO / "results" / "bench_scale.json"
@@ -36,26 +32,12 @@ RESOLUTIONS = (0.5, 1.0, 1.5)
 BUDGET = 150  # explored cells (max_cells): the first ~5 iterations of the exploration
 
 
-def _problem(res: float):
-    from casadi_ws.io.problem import problem_from_dict
-
-    d = yaml.safe_load((REPO / "problems" / "trunk_2cables.yaml").read_text())
-    d["mesh"] = {**d["mesh"], "resolution": res, "order": 2}
-    return problem_from_dict(d, f"trunk_2cables order 2 resolution {res}")
-
-
-def _peak_mb() -> float:
-    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    return max(own, kids) / 1024
-
-
 def dofs(res: float) -> dict:
     """FB with 2 workers and the budget, on the 10-node trunk at resolution ``res``."""
     from casadi_ws import StaticModel
     from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
 
-    pb = _problem(res)
+    pb = trunk_variant(None, 2, res)
     m = StaticModel(pb)
     s = FBSettings(progress=False, workers=2, max_cells=BUDGET)
     s.boundary.enabled = False  # the exploration's cost; a stopped run has no boundary anyway
@@ -64,7 +46,7 @@ def dofs(res: float) -> dict:
     dt = time.perf_counter() - t
     c = r.counters
     return {"time": dt, "cells": int(c["feasible"]), "explored": int(c["explored"]), "dofs": int(m.n_free),
-            "lus": int(c["factorizations"]), "peak_mb": _peak_mb()}
+            "lus": int(c["factorizations"]), "peak_mb": peak_mb()}
 
 
 def dask(kind: str) -> dict:
@@ -86,7 +68,7 @@ def dask(kind: str) -> dict:
     per_task = (time.perf_counter() - t) / 200
     ex.close()
     return {"start": start, "time": dt, "cells": int(len(r.points)), "per_task": per_task,
-            "boundary": float(r.timings.get("boundary", 0.0)), "peak_mb": _peak_mb()}
+            "boundary": float(r.timings.get("boundary", 0.0)), "peak_mb": peak_mb()}
 
 
 def _noop(model):
@@ -94,11 +76,7 @@ def _noop(model):
 
 
 def _run_one(args) -> dict:
-    out = subprocess.run([sys.executable, __file__, "--one", json.dumps(args)], capture_output=True, text=True,
-                         cwd=REPO / "scripts")
-    if out.returncode != 0:
-        raise RuntimeError(out.stderr[-3000:])
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    return run_in_fresh_process(__file__, args)
 
 
 def run(only: str | None) -> dict:

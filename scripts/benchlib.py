@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import platform
 import re
+import resource
 import time
 from pathlib import Path
 
@@ -49,3 +50,38 @@ def write_section(name: str, body: str) -> None:
         text = text.rstrip() + "\n\n" + block + "\n"
     BENCHMARKS.write_text(text)
     print(f"wrote section '{name}' of {BENCHMARKS}")
+
+
+def trunk_variant(name: str | None = None, order: int | None = None, res: float | None = None, linear: str = "auto"):
+    """A shipped problem (default: the 2-cable trunk) with another element order and mesh resolution, and the
+    linear solver ``linear``."""
+    import yaml
+
+    from casadi_ws.io.problem import problem_from_dict
+
+    d = yaml.safe_load((Path(__file__).resolve().parents[1] / "problems" / f"{name or 'trunk_2cables'}.yaml").read_text())
+    if order is not None:
+        d["mesh"] = {**d["mesh"], "resolution": res, "order": order}
+    d["solver"] = {**(d.get("solver") or {}), "linear": linear}
+    return problem_from_dict(d, f"{name} {order} {res}")
+
+
+def peak_mb() -> float:
+    """The largest resident set of this process or of its children that have ended (its workers), MB."""
+    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    return max(own, kids) / 1024
+
+
+def run_in_fresh_process(script: str, args: list) -> dict:
+    """``script --one <args as JSON>`` in a fresh interpreter (so that its peak memory is its own); the JSON
+    its last line prints."""
+    import json
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, script, "--one", json.dumps(args)], capture_output=True, text=True,
+                         cwd=Path(script).resolve().parent)
+    if out.returncode != 0:
+        raise RuntimeError(out.stderr[-3000:])
+    return json.loads(out.stdout.strip().splitlines()[-1])
