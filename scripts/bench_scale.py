@@ -1,6 +1,6 @@
 """Forward-backward cost against model size, and on Dask against the built-in process pool.
 
-    python scripts/bench_scale.py                  # both parts (~25 min on 2 cores), then BENCHMARKS.md
+    python scripts/bench_scale.py                  # both parts (~7 min on 2 cores), then BENCHMARKS.md
     python scripts/bench_scale.py --only dofs      # one part: dofs | dask
     python scripts/bench_scale.py --write          # BENCHMARKS.md's section from results/bench_scale.json
 
@@ -124,7 +124,8 @@ def write(res: dict) -> None:
                          f"{1e3 * r['per_task']:.2f} ms | {r['peak_mb']:.0f} MB |")
         lines += ["", f"Dask's overhead on this run: {k['time'] - p['time']:+.1f} s "
                   f"({100 * (k['time'] / p['time'] - 1):+.0f} %) of exploration, {k['start'] - p['start']:+.1f} s "
-                  "of start-up, not explained by the round trips (at most one task per reached cell, ~5 ms each: under 5 s); not investigated further. "
+                  "of start-up, not explained by the round trips (at most one task per reached cell, ~5 ms each: "
+                  "under 5 s); not investigated further. "
                   "The peak memory of Dask's row may not include its workers (they run under nanny processes)."]
     write_section("scale", "## Forward-backward cost against model size, and on Dask (issue: accurate models at "
                   "interactive speed) — `scripts/bench_scale.py`\n\n" + "\n".join(lines) + "\n")

@@ -59,7 +59,8 @@ def trunk_variant(name: str | None = None, order: int | None = None, res: float 
 
     from casadi_ws.io.problem import problem_from_dict
 
-    d = yaml.safe_load((Path(__file__).resolve().parents[1] / "problems" / f"{name or 'trunk_2cables'}.yaml").read_text())
+    path = Path(__file__).resolve().parents[1] / "problems" / f"{name or 'trunk_2cables'}.yaml"
+    d = yaml.safe_load(path.read_text())
     if order is not None:
         d["mesh"] = {**d["mesh"], "resolution": res, "order": order}
     d["solver"] = {**(d.get("solver") or {}), "linear": linear}
