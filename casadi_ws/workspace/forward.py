@@ -4,7 +4,7 @@ Each actuator's bound [u_min, u_max] is split into ``n_d`` values, and the n_d^n
 in serpentine ("snake") order: grid lines along the last actuator, consecutive lines running in opposite
 directions, so every solve starts next to an already solved point.
 
-Along a line, Newton solves every ``stride``-th point (default ~8 % of the range apart). Its first iterate is
+Along a line, Newton solves every ``stride``-th point (default ~10 % of the range apart). Its first iterate is
 the polynomial through the line's previous Newton points (up to 6; the tangent K^-1 dR/du du at a turn),
 so one Newton step with a fresh factorisation finishes it. The points between are the polynomial through
 the nearest (up to 8) Newton points of the line, and are accepted on the same check as any other point;
@@ -19,13 +19,14 @@ verified equilibrium, by continuation if needed.
 
 from __future__ import annotations
 
+import functools
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
 from ..fem.model import StaticModel
-from ..runtime.executor import Executor, ProcessExecutor, deferred_interrupt, one_blas_thread
+from ..runtime.executor import Executor, deferred_interrupt, make_executor, one_blas_thread
 from ..runtime.run_state import RunState, fingerprint
 from ..solvers.admissible import VIOLATIONS, admissibility, encode
 from ..solvers.equilibrium import (CONVERGED, OUTSIDE_BOUNDS, Equilibrium, inside_bounds, newton_krylov,
@@ -34,8 +35,8 @@ from ..solvers.sensitivity import sensitivity
 from .maps import MAPS, point_maps, state_maps
 from .result import WorkspaceResult, describe
 
-__all__ = ["ForwardSettings", "across_stride", "forward", "input_grid", "lagrange_weights", "line_stride",
-           "snake_order", "sweep"]
+__all__ = ["CUBE_STATES", "ForwardSettings", "across_planes", "across_stride", "forward", "input_grid",
+           "lagrange_weights", "line_stride", "snake_order", "sweep"]
 
 
 @dataclass
@@ -67,8 +68,8 @@ class ForwardSettings:
     stride: int | None = None
     """Along each grid line, Newton solves every ``stride``-th point (and the last); the points between are
     the polynomial through the nearest (up to 8) solved points of the line, accepted if their residual passes
-    the same check, else solved by Newton from there. 1: Newton everywhere. Default: n_d // 12, clamped to
-    [1, 8] (so the solved points stay ~8 % of the range apart)."""
+    the same check, else solved by Newton from there. 1: Newton everywhere. Default: n_d // 10, clamped to
+    [1, 8] (so the solved points stay ~10 % of the range apart)."""
     across: int | None = None
     """With three or more actuators, the grid lines of a plane (the last two actuators varying) are solved
     as above only every ``across``-th line (and the last); the points of the lines between are the
@@ -107,6 +108,12 @@ def lagrange_weights(xs, x) -> np.ndarray:
         others = np.delete(xs, i)
         w[i] = np.prod((x - others) / (xs[i] - others))
     return w
+
+
+@functools.lru_cache(maxsize=4096)
+def _weights(xs: tuple, x: float) -> np.ndarray:
+    """:func:`lagrange_weights`, remembered: the points of a line (plane) between solved ones share them."""
+    return lagrange_weights(xs, x)
 
 
 def _line_axis(u_a, u_b):
@@ -219,7 +226,7 @@ def line_stride(settings, line_length: int) -> int:
     """Grid steps between the Newton-solved points of a line (see :attr:`ForwardSettings.stride`)."""
     if settings.stride is not None:
         return max(1, int(settings.stride))
-    return int(np.clip(line_length // 12, 1, 8))
+    return int(np.clip(line_length // 10, 1, 8))
 
 
 def across_stride(settings, n_u: int, n_lines: int) -> int:
@@ -230,11 +237,11 @@ def across_stride(settings, n_u: int, n_lines: int) -> int:
 
 
 def _grid_positions(n: int, stride: int, reverse: bool) -> list[int]:
-    """Every stride-th of n positions and the last (and half a stride in from each end where the stride is 4
+    """Every stride-th of n positions and the last (and half a stride in from each end where the stride is 3
     or more: there the stencil is one-sided, which interpolates less well), mirrored when the sweep runs
     backwards, so that the solved positions are the same inputs whichever way it runs."""
     grid = set(range(0, n, stride)) | {n - 1}
-    if stride >= 4:
+    if stride >= 3:
         grid |= {stride // 2, n - 1 - stride // 2}
     return sorted(n - 1 - g for g in grid) if reverse else sorted(grid)
 
@@ -364,7 +371,7 @@ def _across(model, u, x, nodes, eqs, masks, maps, settings, tol, counters):
         return eq, *_own_checks(model, eq)
     nodes = sorted(nodes, key=lambda n: abs(n[0] - x))[:_INTERPOLATION_POINTS]
     xs = np.array([n[0] for n in nodes])
-    guess = sum(w * eqs[k].q for w, (_, k) in zip(lagrange_weights(xs, x), nodes))
+    guess = sum(w * eqs[k].q for w, (_, k) in zip(_weights(tuple(xs.tolist()), float(x)), nodes))
     eq = verify(model, u, guess, tol)
     counters["interpolated"] += 1
     if eq.status != CONVERGED:
@@ -529,10 +536,11 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
     workers = max(1, min(int(workers), n // 50 or 1))
     fp = fingerprint("forward", model, {k: getattr(settings, k) for k in
                                         ("n_d", "predictor", "reuse_factorization", "krylov", "tol", "max_iter",
-                                         "store_states", "stride", "across")} | {"workers": workers, "format": 6})
+                                         "store_states", "stride", "across")} | {"workers": workers, "format": 7})
     run = RunState(checkpoint_dir, "forward", fp, resume, t0)
     try:
-        if workers == 1:
+        cube = across_planes(problem.n_u, model.n_dof, settings)
+        if workers == 1 and not cube:
             resume_state = None
             if run.saved is not None:
                 meta, arrays = run.saved
@@ -545,11 +553,11 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
             tips, status, residual, violations, maps, states, counters = sweep(
                 model, us, settings, progress=bar.update if bar else None, resume=resume_state,
                 checkpoint=checkpoint if checkpoint_dir is not None else None)
-        else:
+        else:  # pieces of the grid run by the executor (this process's for the cube on one worker)
             own = executor is None
-            executor = executor or ProcessExecutor(workers, problem)
+            executor = executor or make_executor(workers, model, problem)
             try:
-                tips, status, residual, violations, maps, states, counters = _parallel(
+                tips, status, residual, violations, maps, states, counters = (_cube if cube else _parallel)(
                     problem, us, settings, workers, bar, run, executor)
             finally:
                 if own:
@@ -622,4 +630,142 @@ def _parallel(problem, us, settings, workers, bar, run: RunState, executor: Exec
     maps = np.vstack([r[4] for r in results])
     states = np.vstack([r[5] for r in results]) if settings.store_states else None
     counters = {k: sum(r[6][k] for r in results) for k in results[0][6]}
+    return tips, status, residual, violations, maps, states, counters
+
+
+CUBE_STATES = 1 << 30
+"""Bytes of the solved planes' states that interpolating across planes may hold (n_solved_planes x n_d^2 x
+n_dof doubles: 245 MB on the 3-cable trunk at n_d = 30); a larger cube is swept plane by plane, lines
+interpolated across lines only."""
+
+
+def across_planes(n_u: int, n_dof: int, settings: ForwardSettings) -> bool:
+    """Whether the forward sweep interpolates across planes (:func:`_cube`): three actuators, planes solved
+    only every ``across``-th, and their states within :data:`CUBE_STATES`."""
+    L = settings.n_d
+    across = across_stride(settings, n_u, L)
+    if n_u != 3 or across <= 1 or L < 3:
+        return False
+    return len(_grid_positions(L, across, False)) * L * L * n_dof * 8 <= CUBE_STATES
+
+
+def _plane_rows(planes, P: int) -> np.ndarray:
+    return np.concatenate([np.arange(i * P, (i + 1) * P) for i in planes])
+
+
+def _cube(problem, us, settings, workers, bar, run: RunState, executor: Executor):
+    """Three actuators: the grid is one cube of n_d planes (the first actuator fixed in each). Phase 1
+    sweeps every ``across``-th plane (and the last) as planes are swept elsewhere (lines solved and
+    interpolated across lines), keeping their states; phase 2 interpolates the planes between across the
+    nearest (up to 8) solved planes, point by point at the same inputs of the other two actuators, and
+    verifies them (Newton from there where that fails). Interpolating along one axis needs its solved
+    points from all along it (six solved planes of fifteen left residuals ~1e-7 against eight of thirty's
+    ~1e-9), so the cube is not cut into slabs: each phase is split over the workers (two pieces per
+    worker). Each finished piece is checkpointed, the solved planes with their states, so a resumed run
+    interpolates from the same planes. Returns per-point arrays in grid order and counters."""
+    L = settings.n_d
+    P = L * L
+    x = us[::P, 0]
+    newton = _grid_positions(L, across_stride(settings, 3, L), False)
+    between = [i for i in range(L) if i not in set(newton)]
+    # solved planes: two runs of consecutive ones per worker (each starts cold, from rest); the planes between:
+    # one piece per worker, every workers-th plane (the interpolation fails more often near u = u_min: a
+    # contiguous split would leave one worker most of the Newton solves), each sent the solved planes' states
+    split = [list(g) for g in np.array_split(newton, min(len(newton), 2 * workers))]
+    pieces = [("n", g) for g in split] + [("b", between[k::workers]) for k in range(min(workers, len(between)))]
+    results: dict[int, tuple] = {}
+    if run.saved is not None:
+        meta, saved = run.saved
+        for k, c in meta.get("pieces", {}).items():
+            k = int(k)
+            results[k] = tuple(saved.get(f"{name}_{k}") for name in _PIECE_ARRAYS) + (c,)
+            if bar is not None:
+                bar.update(len(pieces[k][1]) * P)
+
+    def checkpoint():
+        arrays = {f"{name}_{k}": a for k, r in results.items() for name, a in zip(_PIECE_ARRAYS, r) if a is not None}
+        run.save({"pieces": {k: r[-1] for k, r in results.items()}}, arrays)
+
+    def run_phase(kind, make_job, fn):
+        todo = [k for k, (kd, _) in enumerate(pieces) if kd == kind and k not in results]
+        for i, r in executor.map_unordered(fn, problem, [make_job(pieces[k][1]) for k in todo]):
+            results[todo[i]] = r
+            checkpoint()
+            if bar is not None:
+                bar.update(len(r[0]))
+
+    solve = replace(settings, store_states=True)  # phase 2 interpolates from the solved planes' states
+    run_phase("n", lambda g: (us[_plane_rows(g, P)], solve), _sweep_job)
+    solved = [k for k, (kd, _) in enumerate(pieces) if kd == "n"]
+    node_planes = [i for k in solved for i in pieces[k][1]]
+    node = {name: np.concatenate([results[k][a] for k in solved]) for a, name in enumerate(_PIECE_ARRAYS)
+            if name in ("status", "violations", "maps", "states")}
+    node_of = {i: n for n, i in enumerate(node_planes)}
+    at = 0
+    for k in solved:  # one copy of the states: the checkpoint's pieces view the nodes' array
+        m = len(results[k][0])
+        results[k] = results[k][:5] + (node["states"][at:at + m],) + results[k][6:]
+        at += m
+
+    def between_job(g):
+        # the solved planes the pieces' planes interpolate from (the eight nearest of each), and only those
+        nearest = (sorted(node_planes, key=lambda j: abs(x[j] - x[i]))[:_INTERPOLATION_POINTS] for i in g)
+        near = sorted(set().union(*nearest), key=node_of.get)
+        if len(near) == len(node_planes):  # all of them (the usual case): no copy of the states
+            return (us[_plane_rows(g, P)], x[g], x[near], us[_plane_rows(near, P)], node["states"], node["status"],
+                    node["violations"], node["maps"], settings)
+        rows = np.concatenate([np.arange(node_of[j] * P, (node_of[j] + 1) * P) for j in near])
+        return (us[_plane_rows(g, P)], x[g], x[near], us[_plane_rows(near, P)], node["states"][rows],
+                node["status"][rows], node["violations"][rows], node["maps"][rows], settings)
+
+    run_phase("b", between_job, _between_job)
+    out = [np.full((len(us), 3), np.nan), np.zeros(len(us), dtype=int), np.zeros(len(us)),
+           np.zeros(len(us), dtype=np.int64), np.full((len(us), len(MAPS) + 2 * problem.n_u), np.nan),
+           np.zeros((len(us), node["states"].shape[1])) if settings.store_states else None]
+    for k, (_, g) in enumerate(pieces):
+        rows = _plane_rows(g, P)
+        for a, arr in enumerate(out):
+            if arr is not None:
+                arr[rows] = results[k][a]
+    counters = {c: sum(r[-1][c] for r in results.values()) for c in results[0][-1]}
+    return (*out, counters)
+
+
+_PIECE_ARRAYS = ("tips", "status", "residual", "violations", "maps", "states")
+
+
+class _Nodes:
+    """The solved planes' points as :func:`_across` reads them: ``nodes[i].q``, ``nodes[i].u``."""
+
+    def __init__(self, q, u):
+        self.q, self.u = q, u
+
+    def __getitem__(self, i):
+        from types import SimpleNamespace
+
+        return SimpleNamespace(q=self.q[i], u=self.u[i])
+
+
+def _between_job(model, us, x_planes, x_nodes, us_nodes, q_nodes, status_nodes, masks_nodes, maps_nodes, settings):
+    """Phase 2 of :func:`_cube` for some planes between solved ones: every point the polynomial across the
+    solved planes at the same inputs of the other two actuators, verified, checked (:func:`_across`)."""
+    tol = model.problem.solver.tolerance if settings.tol is None else settings.tol
+    counters = dict(solves=0, newton_iterations=0, factorizations=0, load_steps=0, restarts=0, krylov_iterations=0,
+                    interpolated=0, interpolation_failed=0)
+    P = len(us) // len(x_planes)
+    at: dict[bytes, list] = {}
+    for n in np.flatnonzero(status_nodes == CONVERGED):
+        at.setdefault(us_nodes[n, 1:].tobytes(), []).append((x_nodes[n // P], int(n)))
+    nodes = _Nodes(q_nodes, us_nodes)
+    n = len(us)
+    tips, status, residual = np.full((n, 3), np.nan), np.zeros(n, dtype=int), np.zeros(n)
+    violations = np.zeros(n, dtype=np.int64)
+    maps = np.full((n, maps_nodes.shape[1]), np.nan)
+    states = np.zeros((n, model.n_dof)) if settings.store_states else None
+    for j in range(n):
+        eq, violations[j], maps[j] = _across(model, us[j], x_planes[j // P], at.get(us[j, 1:].tobytes(), []),
+                                             nodes, masks_nodes, maps_nodes, settings, tol, counters)
+        tips[j], status[j], residual[j] = eq.tip, eq.status, eq.residual
+        if states is not None and eq.status == CONVERGED:
+            states[j] = eq.q
     return tips, status, residual, violations, maps, states, counters
