@@ -1,15 +1,18 @@
-"""Forward at three inputs: lines interpolated across lines against every line solved, in one run.
+"""Forward at three inputs: planes interpolated across planes, lines across lines, against every line solved.
 
     python scripts/bench_forward_across.py [--nd 30] [--workers 2] [--problem trunk_3cables]
 
-The same code with ``across=1`` (every line solved: the sweep before lines were interpolated across) and with
-the default ``across``; records time per point, Newton solves, factorisations, interpolations and how many
-failed verification, and the largest distance between the two runs' points.
+The same code three ways in one run: ``across=1`` (every line solved), lines interpolated across lines only
+with stride and across 2 (the default until 2026-12-03: planes swept one by one), and the default (stride and
+across n_d // 10; the cube's planes interpolated across planes). Records time per point, Newton solves,
+factorisations, interpolations and how many failed verification, peak memory, and the largest distance
+between the runs' points.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import resource
 import time
 from pathlib import Path
@@ -21,6 +24,7 @@ import casadi_ws as cw
 from casadi_ws.workspace.forward import ForwardSettings, across_stride, forward
 
 REPO = Path(__file__).resolve().parents[1]
+fw = importlib.import_module("casadi_ws.workspace.forward")  # the package exports a function of that name
 
 
 def main():
@@ -31,34 +35,44 @@ def main():
     args = ap.parse_args()
     pb = cw.load_problem(REPO / "problems" / f"{args.problem}.yaml")
     runs, peak = {}, {}
-    for across in (1, None):
-        s = ForwardSettings(n_d=args.nd, workers=args.workers, across=across, progress=False)
+    ways = {"every line solved (across 1)": (dict(across=1), None),
+            "lines across lines, stride 2 (default until 2026-12-03)": (dict(stride=2, across=2), 0),
+            "default: planes across planes too": ({}, None)}
+    cube_states = fw.CUBE_STATES
+    for label, (kw, cube) in ways.items():
+        fw.CUBE_STATES = cube_states if cube is None else cube  # 0: no cube fits, planes are swept one by one
+        s = ForwardSettings(n_d=args.nd, workers=args.workers, progress=False, **kw)
         t = time.perf_counter()
-        runs[across] = (forward(pb, settings=s), time.perf_counter() - t)
+        runs[label] = (forward(pb, settings=s), time.perf_counter() - t)
         # the workers, joined when the run ends, are this process's children: their largest resident set
-        peak[across] = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
-        print(across, f"{runs[across][1]:.1f} s", runs[across][0].counters, flush=True)
+        peak[label] = (resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024,
+                       resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+        print(label, f"{runs[label][1]:.1f} s", runs[label][0].counters, flush=True)
+    fw.CUBE_STATES = cube_states
     n = args.nd ** pb.n_u
     rows = []
-    for across, (r, dt) in runs.items():
+    for label, (r, dt) in runs.items():
         c = r.counters
-        k = across_stride(ForwardSettings(n_d=args.nd), pb.n_u, args.nd) if across is None else across
-        rows.append(f"| {k}{' (default)' if across is None else ''} | {dt:.1f} s | {1e3 * dt / n:.2f} ms | "
-                    f"{c['solves']} | {c['factorizations']} | {c['interpolated']} ({c['interpolation_failed']} failed) | "
-                    f"{r.n_points} | {peak[across]:.0f} MB |")
-    (a, _), (b, _) = runs[1], runs[None]
-    same = np.array_equal(a.u, b.u)
-    gap = float(np.abs(a.points - b.points).max()) if same else float("nan")
+        rows.append(f"| {label} | {dt:.1f} s | {1e3 * dt / n:.2f} ms | "
+                    f"{c['solves']} | {c['factorizations']} | "
+                    f"{c['interpolated']} ({c['interpolation_failed']} failed) | "
+                    f"{r.n_points} | {peak[label][0]:.0f} / {peak[label][1]:.0f} MB |")
+    ref = runs["every line solved (across 1)"][0]
+    gaps = [float(np.abs(ref.points - r.points).max()) if np.array_equal(ref.u, r.u) else float("nan")
+            for r, _ in list(runs.values())[1:]]
+    k = across_stride(ForwardSettings(n_d=args.nd), pb.n_u, args.nd)
     body = "\n".join([
-        f"## Forward at three inputs: lines interpolated across lines — `scripts/bench_forward_across.py --nd {args.nd}`",
+        "## Forward at three inputs: planes across planes, lines across lines — "
+        f"`scripts/bench_forward_across.py --nd {args.nd}`",
         "", f"{machine()}. `problems/{args.problem}.yaml`, n_d = {args.nd} ({n} points), {args.workers} worker "
-        "processes, the same code with `across = 1` (every line of a plane solved, as before) and the default.", "",
-        "| across | time | per point | Newton solves | LUs | interpolated (failed verification) | points | "
-        "peak memory (largest worker so far) |", "|---|---|---|---|---|---|---|---|", *rows, "",
-        f"Same inputs reached: {same}; largest distance between the two runs' points {gap:.1e} m. Peak memory is "
-        "the largest worker of the runs so far (the operating system keeps one maximum for a process's children). "
-        "Until 2026-12-03 the default run was killed by the OOM killer: a plane kept every Newton point's LU to "
-        "its end, 12 GB per worker."])
+        f"processes, the same code three ways (the default stride and across at this n_d: {k}).", "",
+        "| sweep | time | per point | Newton solves | LUs | interpolated (failed verification) | points | "
+        "peak memory: largest worker so far / main process |", "|---|---|---|---|---|---|---|---|", *rows, "",
+        f"Same inputs reached by all three: {all(np.isfinite(gaps))}; largest distance to the every-line run's "
+        f"points {' and '.join(f'{g:.1e}' for g in gaps)} m. Peak memory of the workers is the largest of the "
+        "runs so far (the operating system keeps one maximum for a process's children); the main process holds "
+        "the swept planes' states and sends the workers those their planes interpolate from. Until 2026-12-03 a "
+        "plane kept every Newton point's LU to its end (12 GB per worker, killed by the OOM killer)."])
     write_section("forward-across", body)
 
 
