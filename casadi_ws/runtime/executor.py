@@ -224,10 +224,15 @@ class DaskExecutor(Executor):
     model on its first job of that problem and keeps it. Tasks lost with a worker are run again elsewhere by
     the scheduler, and the jobs are deterministic, so the results are the same. Workers must run one thread
     each: IPOPT under CasADi is not thread-safe.
+
+    ``window`` tasks at most are in flight per ``map_unordered`` (default: two per worker), the next job
+    submitted as one finishes: the caller orders its jobs longest first, and handing all of them to the
+    scheduler at once loses that order (the whole FB of ``trunk_2cables_order2`` with 2 workers: 138-141 s
+    with every task submitted at once, 120 s with a window of 2 and 123 s with 4; the process pool 99 s).
     """
 
     def __init__(self, address: str | None = None, workers: int | None = None, problem=None,
-                 timeout: float = 10.0):
+                 timeout: float = 10.0, window: int | None = None):
         from distributed import Client, LocalCluster
 
         self._cluster = None
@@ -246,6 +251,7 @@ class DaskExecutor(Executor):
         self.workers = max(1, len(self.client.scheduler_info().get("workers", {})))
         self.dashboard = self.client.dashboard_link
         self._blobs: dict[str, object] = {}
+        self.window = max(1, int(window)) if window else 2 * self.workers
 
     def _blob(self, problem):
         key = problem_fingerprint(problem)
@@ -257,13 +263,27 @@ class DaskExecutor(Executor):
         from distributed import as_completed
 
         key, blob = self._blob(problem)
-        futures = [self.client.submit(_call_one_thread, fn, key, blob, job, pure=False) for job in jobs]
-        index = {f.key: i for i, f in enumerate(futures)}
+        todo = iter(enumerate(jobs))
+        index, live = {}, set()
+        done = as_completed()
+
+        def submit_next():
+            for i, job in todo:
+                f = self.client.submit(_call_one_thread, fn, key, blob, job, pure=False)
+                index[f.key] = i
+                live.add(f)
+                done.add(f)
+                return
+
+        for _ in range(self.window):
+            submit_next()
         try:
-            for f in as_completed(futures):
+            for f in done:
+                live.discard(f)
+                submit_next()
                 yield index[f.key], f.result()
         finally:
-            self.client.cancel([f for f in futures if not f.done()])
+            self.client.cancel([f for f in live if not f.done()])
 
     def submit(self, fn, *args):
         return self.client.submit(_plain_one_thread, fn, args, pure=False)
