@@ -469,7 +469,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--workers", type=int, default=None, help="parallel processes, forward and fb (1)")
     s.add_argument("--stride", type=int, default=None,
                    help="forward: Newton every STRIDE-th point of a grid line, the others interpolated and "
-                        "verified (n_d // 10, at most 8; 1: Newton everywhere)")
+                        "verified (n_d // 6, or n_d // 10 after a line where interpolation failed often; at most 8; "
+                        "1: Newton everywhere)")
     s.add_argument("--step", type=float, default=None, help="fb: grid step s_Ed in metres (default: the robot's reach / 48, rounded; 4 mm on the trunk)")
     s.add_argument("--strategy", choices=["uniform", "relative"], default=None, help="fb: discretisation (uniform)")
     s.add_argument("--backward", choices=["reduced", "ipopt"], default=None, help="fb: backward solver (reduced)")

@@ -25,7 +25,7 @@ def main():
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--resolution", type=float, default=1.0)
     ap.add_argument("--predictor", default="extrapolate")
-    ap.add_argument("--stride", type=int, default=None, help="default: ForwardSettings' (n_d // 12, <= 8)")
+    ap.add_argument("--stride", type=int, default=None, help="default: ForwardSettings' (n_d // 6, <= 8)")
     ap.add_argument("--section", default="forward")
     args = ap.parse_args()
     d = dict(DEFAULT_PROBLEM)

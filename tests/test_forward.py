@@ -184,6 +184,58 @@ def test_points_between_newton_points_match_cold_solves(n_u, n_d, stride):
         assert cold.converged and np.linalg.norm(cold.tip - res.points[k]) < 1e-8
 
 
+def test_a_failed_interpolation_becomes_a_node_and_narrows_the_next_line(monkeypatch):
+    """A point whose interpolant fails verification is solved by Newton and interpolated from by the points
+    after it on its line; a line where more than a quarter failed sends the next line to the narrow stride,
+    and a narrow line where (almost) none failed sends the next one back to the wide stride."""
+    import importlib
+
+    from casadi_ws.solvers.equilibrium import DIVERGED
+
+    fw = importlib.import_module("casadi_ws.workspace.forward")
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    n_d = 31
+    us = input_grid(pb.u_min, pb.u_max, n_d)
+    settings = ForwardSettings(n_d=n_d, progress=False)
+    assert fw.line_strides(settings, n_d) == (5, 3)
+    real_verify, real_weights = fw.verify, fw.lagrange_weights
+    fail = {"first": False, "all": False, "calls": 0}
+    nodes = []
+
+    def verify(model, u, q, tol):
+        eq = real_verify(model, u, q, tol)
+        fail["calls"] += 1
+        if fail["all"] or (fail["first"] and fail["calls"] == 1):
+            eq.status = DIVERGED
+        return eq
+
+    def weights(xs, x):
+        nodes.append(set(np.round(xs, 9)))
+        return real_weights(xs, x)
+
+    monkeypatch.setattr(fw, "verify", verify)
+    monkeypatch.setattr(fw, "lagrange_weights", weights)
+    sw, counters = fw._Sweep(), fw.new_counters()
+    interpolated = []
+    for line, mode in enumerate(["first", "all", "all", "none", "none"]):
+        fail.update(first=mode == "first", all=mode == "all", calls=0)
+        nodes.clear()
+        idx = np.arange(line * n_d, (line + 1) * n_d)
+        before = counters["interpolated"]
+        out = fw._solve_line(m, us[idx], idx[0], settings, 1e-8, sw, counters)
+        assert all(eq.converged for eq in out)
+        interpolated.append(counters["interpolated"] - before)
+        if mode == "first":  # the failed point (solved by Newton) is a node of the next one's polynomial
+            x = us[idx, 1]
+            failed = [j for j, eq in enumerate(out) if getattr(eq, "newton", False)
+                      and j not in fw._grid_positions(n_d, 5, bool(x[-1] < x[0]))]
+            assert len(failed) == 1 and any(round(x[failed[0]], 9) in n for n in nodes)
+    # wide (9 Newton points of 31), wide (1 failure of 22 is few), narrow (13) twice (all failed), wide again
+    assert interpolated == [22, 22, 18, 18, 22]
+    assert counters["interpolation_failed"] == 1 + 22 + 18
+
+
 def _three_cable_trunk(u_max=10.0):
     pb = small_trunk("corotational", n_cables=3)
     for c in pb.actuators:
@@ -194,14 +246,13 @@ def _three_cable_trunk(u_max=10.0):
 def test_a_plane_holds_no_lu_of_its_checked_lines():
     """Regression: a plane kept every Newton point's LU until the plane was done (~250 LUs: 12 GB per worker
     on the 3-cable trunk at n_d = 30, killed by the OOM killer). Once a solved line is checked, its LUs go."""
-    from casadi_ws.workspace.forward import _solve_plane, _Sweep
+    from casadi_ws.workspace.forward import _solve_plane, _Sweep, new_counters
 
     pb = _three_cable_trunk()
     m = StaticModel(pb)
     n_d = 7
     us = input_grid(pb.u_min, pb.u_max, n_d)[:n_d * n_d]
-    counters = dict(solves=0, newton_iterations=0, factorizations=0, load_steps=0, restarts=0, krylov_iterations=0,
-                    interpolated=0, interpolation_failed=0)
+    counters = new_counters()
     settings = ForwardSettings(n_d=n_d, stride=1, across=2, progress=False)
     eqs, masks, _ = _solve_plane(m, us, 0, settings, 1e-8, _Sweep(), counters, n_d)
     assert all(eq.converged for eq in eqs) and counters["factorizations"] >= n_d

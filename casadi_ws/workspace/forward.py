@@ -4,7 +4,7 @@ Each actuator's bound [u_min, u_max] is split into ``n_d`` values, and the n_d^n
 in serpentine ("snake") order: grid lines along the last actuator, consecutive lines running in opposite
 directions, so every solve starts next to an already solved point.
 
-Along a line, Newton solves every ``stride``-th point (default ~10 % of the range apart). Its first iterate is
+Along a line, Newton solves every ``stride``-th point (default ~10-17 % of the range apart). Its first iterate is
 the polynomial through the line's previous Newton points (up to 6; the tangent K^-1 dR/du du at a turn),
 so one Newton step with a fresh factorisation finishes it. The points between are the polynomial through
 the nearest (up to 8) Newton points of the line, and are accepted on the same check as any other point;
@@ -36,7 +36,7 @@ from .maps import MAPS, point_maps, state_maps
 from .result import WorkspaceResult, describe
 
 __all__ = ["CUBE_STATES", "ForwardSettings", "across_planes", "across_stride", "forward", "input_grid",
-           "lagrange_weights", "line_stride", "snake_order", "sweep"]
+           "lagrange_weights", "line_stride", "new_counters", "snake_order", "sweep"]
 
 
 @dataclass
@@ -68,15 +68,20 @@ class ForwardSettings:
     stride: int | None = None
     """Along each grid line, Newton solves every ``stride``-th point (and the last); the points between are
     the polynomial through the nearest (up to 8) solved points of the line, accepted if their residual passes
-    the same check, else solved by Newton from there. 1: Newton everywhere. Default: n_d // 10, clamped to
-    [1, 8] (so the solved points stay ~10 % of the range apart)."""
+    the same check, else solved by Newton from there (and interpolated from, for the points after it).
+    1: Newton everywhere. Default: line by line, n_d // 6 (wide) or, on a line after one whose
+    interpolations failed too often, n_d // 10 (narrow), both clamped to [1, 8] (docs/methods.md): on the
+    linear trunks wide pays, on the 10-node trunk narrow."""
     across: int | None = None
     """With three or more actuators, the grid lines of a plane (the last two actuators varying) are solved
     as above only every ``across``-th line (and the last); the points of the lines between are the
     polynomial across lines through the nearest (up to 8) solved lines' points at the same input, accepted
     on the same check, else solved by Newton from there. They inherit stability and self-penetration from
-    the solved lines either side when both pass those. 1: every line solved. Default: as ``stride`` with
-    three or more actuators, 1 with two (their sweep is already ~16 % Newton points at n_d = 100)."""
+    the solved lines either side when both pass those. The cube of three actuators is swept the same way
+    plane by plane (see :func:`_cube`). 1: every line solved. Default with three or more actuators: n_d // 10,
+    clamped to [1, 8] and at most ``stride`` (closer than ``stride``'s default: across lines the polynomial
+    fails verification more often than along them); 1 with two (their sweep is already ~16 % Newton points
+    at n_d = 100)."""
 
 
 def snake_order(n_d: int, n_u: int) -> np.ndarray:
@@ -180,6 +185,16 @@ class _Sweep:
     history: list = field(default_factory=list)  # verified Newton points (u, q) since the last failure, newest last
     fac: object = None  # the last LU, for the tangent predictor at turns
     start: tuple | None = None  # the last verified (q, u), for continuation after a failure
+    narrow: bool = False  # the next line takes the narrow stride (see line_strides)
+
+
+def new_counters() -> dict:
+    """The sweep's counters, all zero: Newton ``solves`` (with their ``newton_iterations``,
+    ``factorizations``, ``load_steps`` of continuation, ``krylov_iterations``), ``restarts`` after a failed
+    point, points ``interpolated`` and verified, of which ``interpolation_failed`` did not pass and were
+    solved by Newton from there (counted among the ``solves`` too)."""
+    return dict(solves=0, newton_iterations=0, factorizations=0, load_steps=0, restarts=0, krylov_iterations=0,
+                interpolated=0, interpolation_failed=0)
 
 
 def _count(counters, eq):
@@ -223,17 +238,31 @@ def _solve_point(model, u, j, settings, tol, sw: _Sweep, counters):
 
 
 def line_stride(settings, line_length: int) -> int:
-    """Grid steps between the Newton-solved points of a line (see :attr:`ForwardSettings.stride`)."""
+    """Grid steps between the Newton-solved points of a line (the wide one of :func:`line_strides`)."""
+    return line_strides(settings, line_length)[0]
+
+
+def line_strides(settings, line_length: int) -> tuple[int, int]:
+    """(wide, narrow): the grid steps between the Newton-solved points of a line, and those of a line after
+    one whose interpolations failed too often (see :attr:`ForwardSettings.stride`); both ``stride`` if given."""
     if settings.stride is not None:
-        return max(1, int(settings.stride))
-    return int(np.clip(line_length // 10, 1, 8))
+        return max(1, int(settings.stride)), max(1, int(settings.stride))
+    return int(np.clip(line_length // 6, 1, 8)), int(np.clip(line_length // 10, 1, 8))
+
+
+# A line whose interpolations failed more often than this sends the next line to the narrow stride; a narrow
+# line failing at most _NARROW_OK of them sends the next one back to the wide stride. Measured at n_d = 30
+# (docs/methods.md): on the linear trunks ~10 % fail at the wide stride, on the 10-node trunk ~70 %.
+_TOO_MANY_FAILED = 0.25
+_NARROW_OK = 0.05
 
 
 def across_stride(settings, n_u: int, n_lines: int) -> int:
-    """Lines between the Newton-solved lines of a plane (see :attr:`ForwardSettings.across`)."""
+    """Lines between the Newton-solved lines of a plane, and planes between the swept planes of a cube
+    (see :attr:`ForwardSettings.across`)."""
     if settings.across is not None:
         return max(1, int(settings.across))
-    return line_stride(settings, n_lines) if n_u >= 3 else 1
+    return min(line_stride(settings, n_lines), int(np.clip(n_lines // 10, 1, 8))) if n_u >= 3 else 1
 
 
 def _grid_positions(n: int, stride: int, reverse: bool) -> list[int]:
@@ -250,7 +279,8 @@ def _solve_line(model, us, first, settings, tol, sw: _Sweep, counters):
     """Solve the points of one grid line (in sweep order, the line's actuator varying): every stride-th by
     Newton, the others by interpolating those and verifying the residual (Newton where that fails)."""
     n = len(us)
-    stride = line_stride(settings, n) if n > 2 else 1
+    wide, narrow = line_strides(settings, n) if n > 2 else (1, 1)
+    stride = narrow if sw.narrow else wide
     # Newton at the same grid positions on every line (whichever way it runs), so their first iterates can
     # be extrapolated across the previous lines, one grid step apart
     newton = _grid_positions(n, stride, n > 1 and bool(np.any(us[-1] < us[0])))
@@ -263,6 +293,7 @@ def _solve_line(model, us, first, settings, tol, sw: _Sweep, counters):
     axis = _line_axis(us[0], us[-1])
     x = us[:, axis]
     solved = np.array([j for j in newton if out[j].status == CONVERGED])
+    failed_before = counters["interpolation_failed"]
     for j in range(n):
         if out[j] is not None:
             continue
@@ -277,11 +308,18 @@ def _solve_line(model, us, first, settings, tol, sw: _Sweep, counters):
         if eq.status != CONVERGED:  # interpolation not good enough here: Newton from it
             counters["interpolation_failed"] += 1
             k = near[0]
+            # polished like a Newton point: it becomes one of the nodes of the points after it
             eq = solve_equilibrium(model, us[j], q0=out[k].q, u0=us[k], guess=guess, tol=tol,
-                                   max_iter=settings.max_iter)
+                                   max_iter=settings.max_iter, target=_POLISH * tol)
             eq.newton = True
             _count(counters, eq)
+            if eq.status == CONVERGED:  # failures cluster: the points after it interpolate from it too
+                solved = np.append(solved, j)
         out[j] = eq
+    tried = n - len(newton)
+    failed = counters["interpolation_failed"] - failed_before
+    if wide != narrow:
+        sw.narrow = failed > _TOO_MANY_FAILED * tried if stride == wide else failed > _NARROW_OK * tried
     return out
 
 
@@ -425,8 +463,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
     violations = np.zeros(n, dtype=np.int64)
     maps = np.full((n, len(MAPS) + 2 * model.n_u), np.nan)
     states = np.zeros((n, model.n_dof)) if settings.store_states else None
-    counters = dict(solves=0, newton_iterations=0, factorizations=0, load_steps=0, restarts=0,
-                    krylov_iterations=0, interpolated=0, interpolation_failed=0)
+    counters = new_counters()
     tol = model.problem.solver.tolerance if settings.tol is None else settings.tol
     sw = _Sweep()
     first = 0
@@ -441,6 +478,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
         sw.history = list(zip(resume["hist_u"], resume["hist_q"]))
         if len(resume["start_q"]):
             sw.start = (resume["start_q"], resume["start_u"])
+        sw.narrow = bool(resume.get("narrow", False))
         if sw.history:  # the LU is not saved: refactorise at the last verified point (tangent predictor)
             u_last, q_last = sw.history[-1]
             sw.fac = tangent_factorization(model, q_last, u_last)
@@ -454,7 +492,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
                   hist_u=np.array([h[0] for h in sw.history]).reshape(len(sw.history), model.n_u),
                   hist_q=np.array([h[1] for h in sw.history]).reshape(len(sw.history), model.n_dof),
                   start_q=np.zeros(0) if sw.start is None else sw.start[0],
-                  start_u=np.zeros(0) if sw.start is None else sw.start[1])
+                  start_u=np.zeros(0) if sw.start is None else sw.start[1], narrow=np.array(sw.narrow))
         if states is not None:
             st["states"] = states[:nxt]
         return st
@@ -536,7 +574,7 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
     workers = max(1, min(int(workers), n // 50 or 1))
     fp = fingerprint("forward", model, {k: getattr(settings, k) for k in
                                         ("n_d", "predictor", "reuse_factorization", "krylov", "tol", "max_iter",
-                                         "store_states", "stride", "across")} | {"workers": workers, "format": 7})
+                                         "store_states", "stride", "across")} | {"workers": workers, "format": 8})
     run = RunState(checkpoint_dir, "forward", fp, resume, t0)
     try:
         cube = across_planes(problem.n_u, model.n_dof, settings)
@@ -750,8 +788,7 @@ def _between_job(model, us, x_planes, x_nodes, us_nodes, q_nodes, status_nodes, 
     """Phase 2 of :func:`_cube` for some planes between solved ones: every point the polynomial across the
     solved planes at the same inputs of the other two actuators, verified, checked (:func:`_across`)."""
     tol = model.problem.solver.tolerance if settings.tol is None else settings.tol
-    counters = dict(solves=0, newton_iterations=0, factorizations=0, load_steps=0, restarts=0, krylov_iterations=0,
-                    interpolated=0, interpolation_failed=0)
+    counters = new_counters()
     P = len(us) // len(x_planes)
     at: dict[bytes, list] = {}
     for n in np.flatnonzero(status_nodes == CONVERGED):
