@@ -2,9 +2,10 @@
 
     python scripts/bench_forward_across.py [--nd 30] [--workers 2] [--problem trunk_3cables]
 
-The same code three ways in one run: ``across=1`` (every line solved), lines interpolated across lines only
-with stride and across 2 (the default until 2026-12-03: planes swept one by one), and the default (stride and
-across n_d // 10; the cube's planes interpolated across planes). Records time per point, Newton solves,
+The same code four ways in one run: ``across=1`` (every line solved), lines interpolated across lines only
+with stride and across 2 (the default until 2026-12-03: planes swept one by one), stride and across n_d // 10
+(the default until 2026-12-04; the cube's planes interpolated across planes) and the default (stride n_d // 6,
+across n_d // 10). Records time per point, Newton solves,
 factorisations, interpolations and how many failed verification, peak memory, and the largest distance
 between the runs' points.
 """
@@ -21,7 +22,7 @@ import numpy as np
 from benchlib import machine, write_section
 
 import casadi_ws as cw
-from casadi_ws.workspace.forward import ForwardSettings, across_stride, forward
+from casadi_ws.workspace.forward import ForwardSettings, across_stride, forward, line_stride
 
 REPO = Path(__file__).resolve().parents[1]
 fw = importlib.import_module("casadi_ws.workspace.forward")  # the package exports a function of that name
@@ -35,9 +36,12 @@ def main():
     args = ap.parse_args()
     pb = cw.load_problem(REPO / "problems" / f"{args.problem}.yaml")
     runs, peak = {}, {}
-    ways = {"every line solved (across 1)": (dict(across=1), None),
+    ways = {"every line solved (across 1, stride n_d // 10)": (dict(across=1, stride=args.nd // 10), None),
             "lines across lines, stride 2 (default until 2026-12-03)": (dict(stride=2, across=2), 0),
-            "default: planes across planes too": ({}, None)}
+            "planes across planes too, stride and across n_d // 10 (default until 2026-12-04)":
+                (dict(stride=args.nd // 10, across=args.nd // 10), None),
+            "default: stride n_d // 6 (n_d // 10 after a line whose interpolations failed), across n_d // 10":
+                ({}, None)}
     cube_states = fw.CUBE_STATES
     for label, (kw, cube) in ways.items():
         fw.CUBE_STATES = cube_states if cube is None else cube  # 0: no cube fits, planes are swept one by one
@@ -57,19 +61,20 @@ def main():
                     f"{c['solves']} | {c['factorizations']} | "
                     f"{c['interpolated']} ({c['interpolation_failed']} failed) | "
                     f"{r.n_points} | {peak[label][0]:.0f} / {peak[label][1]:.0f} MB |")
-    ref = runs["every line solved (across 1)"][0]
+    ref = next(iter(runs.values()))[0]
     gaps = [float(np.abs(ref.points - r.points).max()) if np.array_equal(ref.u, r.u) else float("nan")
             for r, _ in list(runs.values())[1:]]
-    k = across_stride(ForwardSettings(n_d=args.nd), pb.n_u, args.nd)
+    d = ForwardSettings(n_d=args.nd)
+    k = f"stride {line_stride(d, args.nd)}, across {across_stride(d, pb.n_u, args.nd)}"
     body = "\n".join([
         "## Forward at three inputs: planes across planes, lines across lines — "
         f"`scripts/bench_forward_across.py --nd {args.nd}`",
         "", f"{machine()}. `problems/{args.problem}.yaml`, n_d = {args.nd} ({n} points), {args.workers} worker "
-        f"processes, the same code three ways (the default stride and across at this n_d: {k}).", "",
+        f"processes, the same code four ways (the default at this n_d: {k}).", "",
         "| sweep | time | per point | Newton solves | LUs | interpolated (failed verification) | points | "
         "peak memory: largest worker so far / main process |", "|---|---|---|---|---|---|---|---|", *rows, "",
-        f"Same inputs reached by all three: {all(np.isfinite(gaps))}; largest distance to the every-line run's "
-        f"points {' and '.join(f'{g:.1e}' for g in gaps)} m. Peak memory of the workers is the largest of the "
+        f"Same inputs reached by all four: {all(np.isfinite(gaps))}; largest distance to the every-line run's "
+        f"points {', '.join(f'{g:.1e}' for g in gaps)} m. Peak memory of the workers is the largest of the "
         "runs so far (the operating system keeps one maximum for a process's children); the main process holds "
         "the swept planes' states and sends the workers those their planes interpolate from. Until 2026-12-03 a "
         "plane kept every Newton point's LU to its end (12 GB per worker, killed by the OOM killer)."])
