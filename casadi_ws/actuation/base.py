@@ -21,7 +21,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-__all__ = ["Actuator", "quantity_functions"]
+__all__ = ["Actuator", "quantity_functions", "third_function"]
 
 
 class Actuator:
@@ -84,19 +84,28 @@ def quantity_functions(actuator: Actuator) -> dict:
                                   ``hessian_sparsity``); the model stacks these of all actuators into one
                                   function, as one CasADi call costs more than the arithmetic
     ``hessian_sparsity``          the structural pattern of d2Q/dP2 that CasADi derives from Q
-    ``third``                     Function (P, mu) -> d2(mu . dQ/dP)/dP2 (3k x 3k, CasADi's sparsity):
-                                  the actuator's share of a Lagrangian Hessian
+
+    The third derivatives are :func:`third_function`'s, built only where they are used.
     """
     k = np.asarray(actuator.rest_points()).shape[0]
     P = ca.SX.sym("P", 3 * k)
     Q = actuator.quantity(P)
     g = ca.gradient(Q, P)
     H = ca.hessian(Q, P)[0]
-    mu = ca.SX.sym("mu", 3 * k)
-    T = ca.hessian(ca.dot(mu, g), P)[0]
     return {
         "P": P, "Q": Q, "dQ": g,
         "d2Q": ca.vertcat(*H.nonzeros()) if H.nnz() else ca.SX.zeros(0, 1),
         "hessian_sparsity": H.sparsity(),
-        "third": ca.Function(f"{actuator.kind}_third", [P, mu], [T], ["P", "mu"], ["T"]),
     }
+
+
+def third_function(actuator: Actuator) -> ca.Function:
+    """Function (P, mu) -> d2(mu . dQ/dP)/dP2 (3k x 3k, CasADi's sparsity): the actuator's share of a
+    Lagrangian Hessian, which only the full-space NLP needs. Apart from :func:`quantity_functions` because
+    a cavity's took ~60 % of building a model (the third derivative of its whole surface's volume; 3 s of
+    ~9 s for a 10-node hollow sphere), paid by every model that never uses it."""
+    k = np.asarray(actuator.rest_points()).shape[0]
+    P = ca.SX.sym("P", 3 * k)
+    mu = ca.SX.sym("mu", 3 * k)
+    T = ca.hessian(ca.dot(mu, ca.gradient(actuator.quantity(P), P)), P)[0]
+    return ca.Function(f"{actuator.kind}_third", [P, mu], [T], ["P", "mu"], ["T"])

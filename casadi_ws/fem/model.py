@@ -37,7 +37,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ..actuation.base import quantity_functions
+from ..actuation.base import quantity_functions, third_function
 from .contact import contact_set, split_faces
 from .pressure import ContinuousPressure
 from .terms import ObstacleContact, SelfContact, fischer_burmeister
@@ -81,8 +81,14 @@ class _ActuatorData:
     """(3k x 3n) positions of the actuator's points = W @ x."""
     hessian_sparsity: ca.Sparsity
     """Pattern of d2Q/dP2 (3k x 3k) as CasADi derives it."""
-    third: ca.Function
-    """(P, mu) -> d2(mu . dQ/dP)/dP2, for Lagrangian Hessians."""
+    _third: ca.Function | None = None
+
+    @property
+    def third(self) -> ca.Function:
+        """(P, mu) -> d2(mu . dQ/dP)/dP2, for Lagrangian Hessians; built on first use (costly for a cavity)."""
+        if self._third is None:
+            self._third = third_function(self.actuator)
+        return self._third
 
 
 class StaticModel:
@@ -288,7 +294,7 @@ class StaticModel:
         for a in self.actuators:
             pieces = quantity_functions(a)
             W = self._points_matrix(a)
-            self._act.append(_ActuatorData(a, W, pieces["hessian_sparsity"], pieces["third"]))
+            self._act.append(_ActuatorData(a, W, pieces["hessian_sparsity"]))
             Ps.append(pieces["P"])
             Qs.append(pieces["Q"])
             gs.append(pieces["dQ"])
