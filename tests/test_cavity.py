@@ -89,6 +89,27 @@ def test_box_chamber_is_found_and_has_the_exact_volume(order):
         cavity_enclosing(mesh, [0.5, 0.5, 0.5])
 
 
+@pytest.mark.parametrize("six", [False, True])
+def test_the_volume_summed_over_faces_has_the_derivatives_of_the_whole(rng, six):
+    """quantity_functions takes a cavity's volume face by face (Cavity.quantity_terms, ~6x faster to build
+    than differentiating the whole surface's); the same value, gradient and Hessian, with the same pattern."""
+    import casadi as ca
+
+    X, F = sphere6(1) if six else icosphere(1)
+    X = X * 0.01 + rng.normal(size=X.shape) * 1e-4
+    cav = Cavity(X, F, None, 0.0, 1.0)
+    f = quantity_functions(cav)
+    P = ca.SX.sym("P", X.size)
+    Q = cav.quantity(P)
+    H = ca.hessian(Q, P)[0]
+    assert f["hessian_sparsity"] == H.sparsity()
+    whole = ca.Function("w", [P], [Q, ca.gradient(Q, P), H])
+    parts = ca.Function("p", [f["P"]], [f["Q"], f["dQ"], ca.SX(f["hessian_sparsity"], f["d2Q"])])
+    for a, b in zip(whole(X.ravel()), parts(X.ravel())):
+        a, b = a.full(), b.full()
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-13 * np.abs(a).max())
+
+
 @pytest.mark.parametrize("level, six", [(1, False), (1, True)])
 def test_volume_derivatives_and_invariance(rng, level, six):
     X, F = sphere6(level) if six else icosphere(level)

@@ -66,6 +66,13 @@ class Actuator:
         :meth:`rest_points`."""
         raise NotImplementedError
 
+    def quantity_terms(self) -> tuple[ca.Function, np.ndarray] | None:
+        """Q as a sum of small terms, or None (the default: Q taken whole): (f, idx) with Q(P) =
+        sum_t f(P[idx[t]]), f a Function of a few coordinates, idx (n_terms, n_in) indices into P. Its
+        derivatives are then those of f, summed (:func:`quantity_functions`), which costs far less than
+        differentiating a whole surface's volume."""
+        return None
+
     def quantity_limits(self, rest: float) -> tuple[float, float, str]:
         """Bounds on Q that a state must keep (a cable's stroke, a chamber's volume), given Q at rest, and
         the name of the violation (:mod:`casadi_ws.solvers.admissible`); none by default."""
@@ -89,14 +96,51 @@ def quantity_functions(actuator: Actuator) -> dict:
     """
     k = np.asarray(actuator.rest_points()).shape[0]
     P = ca.SX.sym("P", 3 * k)
-    Q = actuator.quantity(P)
-    g = ca.gradient(Q, P)
-    H = ca.hessian(Q, P)[0]
+    terms = actuator.quantity_terms()
+    if terms is None:
+        Q = actuator.quantity(P)
+        g = ca.gradient(Q, P)
+        H = ca.hessian(Q, P)[0]
+    else:
+        Q, g, H = _summed_derivatives(P, *terms)
     return {
         "P": P, "Q": Q, "dQ": g,
         "d2Q": ca.vertcat(*H.nonzeros()) if H.nnz() else ca.SX.zeros(0, 1),
         "hessian_sparsity": H.sparsity(),
     }
+
+
+def _summed_derivatives(P, f: ca.Function, idx: np.ndarray):
+    """(Q, dQ/dP, d2Q/dP2) of Q = sum_t f(P[idx[t]]): every term's derivatives by one mapped call, summed
+    into P's by sparse 0/1 matrices (one product each, not one per term)."""
+    import scipy.sparse as sps
+
+    idx = np.asarray(idx, dtype=np.int64)
+    m, n_in = idx.shape
+    n = P.numel()
+    x = ca.SX.sym("x", n_in)
+    v = f(x)
+    h, gx = ca.hessian(v, x)
+    hr, hc = (np.asarray(a, dtype=np.int64) for a in h.sparsity().get_triplet())
+    out = ca.Function("terms", [x], [v, gx, ca.vertcat(*h.nonzeros()) if h.nnz() else ca.SX(0, 1)]).map(m)
+    X = ca.reshape(P[idx.ravel().tolist()], n_in, m)  # column t: the coordinates of term t
+    vt, gt, ht = out(X)  # (1, m), (n_in, m), (nnz_h, m)
+
+    def summed(rows, cols, values, shape):
+        """The 0/1 matrix that adds values[j] into entry j's (rows[j], cols[j]) of the flat target."""
+        S = sps.csc_matrix((np.ones(rows.size), (rows, cols)), shape=shape)
+        return ca.mtimes(ca.DM(S), values)
+
+    g = summed(idx.ravel(), np.arange(m * n_in).reshape(m, n_in).ravel(), ca.vec(gt), (n, m * n_in))
+    R, C = idx[:, hr].ravel(), idx[:, hc].ravel()  # term-major, as vec(ht) runs
+    pattern = sps.csc_matrix((np.ones(R.size), (R, C)), shape=(n, n))
+    pattern.sum_duplicates()
+    sp = ca.Sparsity(n, n, pattern.indptr.tolist(), pattern.indices.tolist())
+    # position of each (R, C) among the pattern's nonzeros (column-major, as CasADi stores them)
+    key = pattern.indptr[C] + np.array([np.searchsorted(pattern.indices[pattern.indptr[c]:pattern.indptr[c + 1]], r)
+                                        for r, c in zip(R, C)])
+    nz = summed(key, np.arange(R.size), ca.vec(ht), (sp.nnz(), R.size))
+    return ca.sum2(vt), g, ca.SX(sp, nz)
 
 
 def third_function(actuator: Actuator) -> ca.Function:

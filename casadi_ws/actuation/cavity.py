@@ -10,7 +10,7 @@ the cavity, into the solid):
 
 A pressure p does the virtual work p dV, so its force on the nodes is p dV/dq (sign +1 in
 :class:`casadi_ws.actuation.base.Actuator`) and its tangent stiffness p d2V/dq2: CasADi derives both, exactly,
-from V. This is SOFA's SurfacePressureConstraint in pressure mode. The surface's vertices are mesh nodes
+from V, face by face (:meth:`Cavity.quantity_terms`). This is SOFA's SurfacePressureConstraint in pressure mode. The surface's vertices are mesh nodes
 (``nodes``), so they move exactly with the body; with 10-node tetrahedra the faces are 6-node triangles
 (VTK ``triangle6``: corners, then the mid-edge nodes of edges 01, 12, 20) and follow the body's quadratic
 displacement.
@@ -109,6 +109,14 @@ class Cavity(Actuator):
     def quantity(self, P: ca.SX) -> ca.SX:
         k = P.numel() // 3
         return surface_volume(ca.reshape(P, 3, k).T, self.triangles)
+
+    def quantity_terms(self):
+        """The volume as a sum over the faces, each its own triangle's term of :func:`surface_volume`."""
+        n = np.asarray(self.triangles).shape[1]
+        x = ca.SX.sym("x", 3 * n)
+        face = ca.Function("face_volume", [x], [surface_volume(ca.reshape(x, 3, n).T, np.arange(n)[None, :])])
+        tri = np.asarray(self.triangles, dtype=np.int64)
+        return face, (3 * tri[:, :, None] + np.arange(3)).reshape(len(tri), 3 * n)
 
     def rest_volume(self) -> float:
         return float(surface_volume(self.rest_points(), self.triangles))
