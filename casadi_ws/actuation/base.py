@@ -136,9 +136,9 @@ def _summed_derivatives(P, f: ca.Function, idx: np.ndarray):
     pattern = sps.csc_matrix((np.ones(R.size), (R, C)), shape=(n, n))
     pattern.sum_duplicates()
     sp = ca.Sparsity(n, n, pattern.indptr.tolist(), pattern.indices.tolist())
-    # position of each (R, C) among the pattern's nonzeros (column-major, as CasADi stores them)
-    key = pattern.indptr[C] + np.array([np.searchsorted(pattern.indices[pattern.indptr[c]:pattern.indptr[c + 1]], r)
-                                        for r, c in zip(R, C)])
+    # position of each (R, C) among the pattern's nonzeros, which run column-major as CasADi stores them
+    cols = np.repeat(np.arange(n), np.diff(pattern.indptr))
+    key = np.searchsorted(cols * n + pattern.indices, C * n + R)
     nz = summed(key, np.arange(R.size), ca.vec(ht), (sp.nnz(), R.size))
     return ca.sum2(vt), g, ca.SX(sp, nz)
 

@@ -10,10 +10,10 @@ the cavity, into the solid):
 
 A pressure p does the virtual work p dV, so its force on the nodes is p dV/dq (sign +1 in
 :class:`casadi_ws.actuation.base.Actuator`) and its tangent stiffness p d2V/dq2: CasADi derives both, exactly,
-from V, face by face (:meth:`Cavity.quantity_terms`). This is SOFA's SurfacePressureConstraint in pressure mode. The surface's vertices are mesh nodes
-(``nodes``), so they move exactly with the body; with 10-node tetrahedra the faces are 6-node triangles
-(VTK ``triangle6``: corners, then the mid-edge nodes of edges 01, 12, 20) and follow the body's quadratic
-displacement.
+from V, face by face (:meth:`Cavity.quantity_terms`). This is SOFA's SurfacePressureConstraint in pressure
+mode. The surface's vertices are mesh nodes (``nodes``), so they move exactly with the body; with 10-node
+tetrahedra the faces are 6-node triangles (VTK ``triangle6``: corners, then the mid-edge nodes of edges 01,
+12, 20) and follow the body's quadratic displacement.
 """
 
 from __future__ import annotations
