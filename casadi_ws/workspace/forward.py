@@ -437,11 +437,14 @@ def _across(model, u, x, nodes, eqs, masks, maps, settings, tol, counters):
 
 
 def _own_checks(model, eq):
-    """Admissibility mask and maps of a Newton-solved point, from its own LU."""
+    """Admissibility mask and maps of a Newton-solved point, from its own LU (then dropped: the point is
+    kept to the end of its plane, and where the interpolation across lines fails often, a plane's LUs
+    took 12 GB per worker)."""
     row = np.full(len(MAPS) + 2 * model.n_u, np.nan)
     if eq.status != CONVERGED:
         return 0, row
     fac = eq.factorization if eq.factorization is not None else tangent_factorization(model, eq.q, eq.u)
+    eq.factorization = None
     mask = admissibility(model, eq.q, eq.u, fac).mask
     m = point_maps(model, eq.q, eq.u, sensitivity(model, eq.q, fac)[0], fac)
     return mask, np.array([m[name] for name in MAPS] + list(m["states"]) + list(m["intensities"]))
