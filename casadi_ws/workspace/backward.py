@@ -167,14 +167,14 @@ LIMIT_MARGIN = 0.02
 def _within_limits(model, q, A, S, r, du, lo, hi):
     """The step kept within the problem's state limits (a cable's stroke, a chamber's volume), linearised at
     q: Q(u + du) ~ Q + dQ/dq S du (:func:`casadi_ws.solvers.sensitivity.limited_step`)."""
-    lo, hi, names = model.quantity_limits
+    q_lo, q_hi, names = model.quantity_limits  # (not lo, hi: those are the step's box)
     rows = [a for a, n in enumerate(names) if n]
     if not rows:
         return du
     Q, dQ, _ = model.actuator_terms(q)
     G = dQ[rows][:, model.free] @ S
     # 98 % of the way to a limit: the linearisation would otherwise land the equilibrium a hair beyond it
-    g_lo, g_hi = lo[rows] - Q[rows], hi[rows] - Q[rows]
+    g_lo, g_hi = q_lo[rows] - Q[rows], q_hi[rows] - Q[rows]
     with np.errstate(invalid="ignore"):  # unlimited sides stay infinite
         g_lo = np.where(np.isfinite(g_lo), g_lo + LIMIT_MARGIN * np.abs(g_lo), g_lo)
         g_hi = np.where(np.isfinite(g_hi), g_hi - LIMIT_MARGIN * np.abs(g_hi), g_hi)
