@@ -317,7 +317,8 @@ def _reach_settings(args):
         raise UsageError(f"--max-du: expected a positive number of newtons, got {args.max_du}")
     if not args.regularization >= 0:
         raise UsageError(f"--regularization: expected >= 0, got {args.regularization}")
-    return ReachSettings(tolerance=args.tolerance, regularization=args.regularization, max_du=args.max_du)
+    return ReachSettings(tolerance=args.tolerance, regularization=args.regularization, max_du=args.max_du,
+                         method=args.method)
 
 
 def cmd_reach(args) -> int:
@@ -531,6 +532,9 @@ def build_parser() -> argparse.ArgumentParser:
         r.add_argument("--regularization", type=float, default=0.0,
                        help="weight (m^2/N^2) of |u|^2 (reach) or |u - u_previous|^2 (follow)")
         r.add_argument("--max-du", type=float, default=None, help="largest change of each tension per solve (N)")
+        r.add_argument("--method", choices=("reduced", "ipopt"), default="reduced",
+                       help="reduced: Gauss-Newton in the tensions on verified equilibria (fast; IPOPT where it "
+                            "stalls); ipopt: the full-space NLP over displacements and tensions")
 
     c = sub.add_parser("compare", help="agreement of two result directories (strict cell recall first, Hausdorff, volumes)")
     c.add_argument("a", help="result directory A (e.g. forward)")

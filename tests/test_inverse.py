@@ -123,11 +123,30 @@ def test_reach_with_different_extra_points_of_the_same_count(rng):
         np.testing.assert_allclose((W @ (m.X + r.q)).reshape(-1, 3), goal, atol=1e-6)
 
 
+@pytest.mark.parametrize("method", ["reduced", "ipopt"])
 @pytest.mark.parametrize("model", ["corotational", "neohookean"])
-def test_reach_on_ten_node_elements(model):
+def test_reach_on_ten_node_elements(model, method):
     """IPOPT needs the element Hessians: on 10-node elements they are built per quadrature point (the
     corotational one was once too large to compile, and then failed to run at all)."""
     pb = cantilever(n=1, slender=5, model=model, nu=0.3, cable_offset=0.01, order=2)
     target = solve_equilibrium(StaticModel(pb), np.array([2.0])).tip
-    r = reach(pb, target)
-    assert r.reachable and r.status == 0 and r.u[0] == pytest.approx(2.0, rel=1e-5)
+    r = reach(pb, target, settings=ReachSettings(method=method))
+    assert r.reachable and r.status == 0 and r.u[0] == pytest.approx(2.0, rel=1e-5) and r.method == method
+
+
+def test_the_reduced_and_the_full_space_methods_find_the_same_answers():
+    """Gauss-Newton in u (the default) against IPOPT over (q, u), each verified: a far target (the closest
+    tip, on U's bound), a regularised one (a compromise inside U) and one out of a change limit."""
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    near = solve_equilibrium(m, [60.0, 30.0]).tip
+    start = solve_equilibrium(m, [0.0, 0.0])
+    cases = [(np.array([0.08, 0.08, 0.15]), {}, {}), (near, dict(regularization=1e-8), {}),
+             (near, dict(max_du=10.0), dict(q0=start.q, u0=start.u))]
+    for target, kw, start_at in cases:
+        a = reach(m, target, settings=ReachSettings(**kw), **start_at)
+        b = reach(m, target, settings=ReachSettings(method="ipopt", **kw), **start_at)
+        assert a.method == "reduced" and a.status == 0 and b.method == "ipopt"
+        assert a.error == pytest.approx(b.error, rel=1e-5, abs=1e-9)
+        np.testing.assert_allclose(a.u, b.u, rtol=1e-4, atol=1e-4)
+        np.testing.assert_allclose(a.tip, b.tip, atol=1e-7)
