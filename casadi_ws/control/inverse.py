@@ -8,7 +8,7 @@ a warm start, by one of two methods (``ReachSettings.method``):
              linear least-squares step in u (kept within the state limits, linearised), the equilibrium at
              u + du is solved by Newton from q + K^-1 H^T du, and a step that does not lower the objective
              is halved. Every iterate is a verified equilibrium. On the 2-cable trunk a target costs
-             ~0.2 s where IPOPT took ~8 s (its exact Hessian of the residual is a third derivative of the
+             0.2-0.3 s where IPOPT took 6-8 s (its exact Hessian of the residual is a third derivative of the
              elements, and its KKT systems are twice the size of K).
 ``ipopt``    the full-space NLP over (q, u) with exact derivatives (:func:`casadi_ws.nlp.formulations.tracking`).
              If the direct solve fails, it follows a homotopy: the target moves from the current tip to
