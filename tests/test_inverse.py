@@ -150,3 +150,22 @@ def test_the_reduced_and_the_full_space_methods_find_the_same_answers():
         assert a.error == pytest.approx(b.error, rel=1e-5, abs=1e-9)
         np.testing.assert_allclose(a.u, b.u, rtol=1e-4, atol=1e-4)
         np.testing.assert_allclose(a.tip, b.tip, atol=1e-7)
+
+
+def test_reach_gets_past_a_local_minimum_where_the_jaws_must_touch():
+    """The pinch gripper's upper-jaw tip at a state where the lower jaw pushes it up: from rest, Gauss-Newton
+    stops 0.12 mm short with the lower jaw's cable at 0 (a local minimum of the distance: that cable moves
+    the tip only once the jaws touch); the restart from the middle of U reaches the tip and its inputs."""
+    from conftest import REPO
+
+    import casadi_ws as cw
+
+    pb = cw.load_problem(REPO / "problems" / "pinch_gripper.yaml")
+    m = StaticModel(pb)
+    u = np.array([0.777721, 0.50234])
+    goal = solve_equilibrium(m, u)
+    r = reach(m, goal.tip)
+    assert r.reachable and r.method == "reduced" and r.error < 1e-6
+    np.testing.assert_allclose(r.u, u, atol=1e-4)
+    jaws, = m.contacts(r.q)  # the jaws press on each other (~7 mN on 3 points)
+    assert jaws["points"] > 0 and np.linalg.norm(jaws["force"]) > 1e-3

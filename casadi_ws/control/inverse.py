@@ -7,9 +7,12 @@ a warm start, by one of two methods (``ReachSettings.method``):
              equilibrium the points' sensitivity J = W K^-1 H^T (one LU, n_u solves) gives a bounded
              linear least-squares step in u (kept within the state limits, linearised), the equilibrium at
              u + du is solved by Newton from q + K^-1 H^T du, and a step that does not lower the objective
-             is halved. Every iterate is a verified equilibrium. On the 2-cable trunk a target costs
-             0.2-0.3 s where IPOPT took 6-8 s (its exact Hessian of the residual is a third derivative of the
-             elements, and its KKT systems are twice the size of K).
+             is halved. Every iterate is a verified equilibrium. A target it does not reach gets a second
+             run from the middle of U (a local minimum of the distance is not the closest point), and
+             where Gauss-Newton stalls the full-space NLP runs from the same start. On the 2-cable trunk a
+             target costs 0.3-1 s where IPOPT took 6-9 s (its exact Hessian of the residual is a third
+             derivative of the elements, and its KKT systems are twice the size of K); on the pinch gripper
+             11 s against 372 s, and on the PneuNet finger 1.3 s where IPOPT stopped 0.26 mm short.
 ``ipopt``    the full-space NLP over (q, u) with exact derivatives (:func:`casadi_ws.nlp.formulations.tracking`).
              If the direct solve fails, it follows a homotopy: the target moves from the current tip to
              the goal in steps, each solve warm-started by the previous one. The answer is re-verified by a
@@ -121,6 +124,8 @@ def reach(problem_or_model, target, q0=None, u0=None, settings: ReachSettings | 
         raise ValueError(f"unknown reach method {settings.method!r}; expected 'reduced' or 'ipopt'")
     if settings.method == "reduced":
         r = _reduced(model, targets, q0, u0, settings, u_ref)
+        if r.status == Status.CONVERGED and not r.reachable:
+            r = _restart_from_the_middle(model, targets, q0, u0, settings, u_ref, r)
         if r.status == Status.CONVERGED:
             return r
         # Gauss-Newton stalled (a cable that the others' pull keeps slack turns its steps aside): the
@@ -164,6 +169,34 @@ def _ipopt(model, targets, q0, u0, settings: ReachSettings, u_ref) -> ReachResul
                        method="ipopt")
 
 
+def _restart_from_the_middle(model, targets, q0, u0, settings, u_ref, r: ReachResult) -> ReachResult:
+    """Gauss-Newton once more, from the middle of the inputs allowed; the better of the two answers.
+
+    A target Gauss-Newton did not reach may lie beyond a local minimum of the distance: the pinch gripper's
+    upper jaw, its lower jaw's cable at 0, stopped 0.12 mm short of a tip that only the lower jaw pushing it
+    reaches; from the middle of U it reached it (IPOPT took 372 s there). A target outside the workspace
+    costs this second run and keeps the first answer unless the second is closer."""
+    lo, hi = model.u_min, model.u_max
+    if settings.max_du is not None:
+        lo, hi = np.maximum(lo, u0 - settings.max_du), np.minimum(hi, u0 + settings.max_du)
+    mid = solve_equilibrium(model, (lo + hi) / 2, q0=q0, u0=u0)
+    if mid.status != CONVERGED:
+        return r
+    r2 = _reduced(model, targets, mid.q, mid.u, settings, u_ref, u_box=u0)
+    r2.iterations += r.iterations
+    r.iterations = r2.iterations
+    better = _objective(model, settings, targets, r2.q, r2.u, u_ref) < \
+        (1 - 1e-9) * _objective(model, settings, targets, r.q, r.u, u_ref)
+    return r2 if r2.status == Status.CONVERGED and better else r
+
+
+def _objective(model, settings, targets, q, u, u_ref) -> float:
+    """sum_i |p_i(q) - t_i|^2 + rho |u - u_ref|^2 (u_ref None: 0)."""
+    p = _points(model, settings) @ (model.X + q)
+    ref = np.zeros(model.n_u) if u_ref is None else np.asarray(u_ref, float)
+    return float(np.sum((p - targets.ravel()) ** 2) + settings.regularization * np.sum((u - ref) ** 2))
+
+
 def _points(model, settings):
     """W (3k x n_dof): the tip and the extra points (positions W (X + q), in the order of ``targets``)."""
     if not settings.extra_points:
@@ -171,17 +204,19 @@ def _points(model, settings):
     return model.embedding(np.vstack([model.p0[None], np.asarray(settings.extra_points, float)]))
 
 
-def _reduced(model, targets, q, u, settings: ReachSettings, u_ref) -> ReachResult:
-    """Gauss-Newton in u from the verified equilibrium (q, u); see the module's docstring."""
+def _reduced(model, targets, q, u, settings: ReachSettings, u_ref, u_box=None) -> ReachResult:
+    """Gauss-Newton in u from the verified equilibrium (q, u); see the module's docstring. ``u_box``: the
+    centre of the ``max_du`` box (default u)."""
     W = _points(model, settings)
     Wf = W[:, model.free].tocsr()
     goal = targets.ravel()
     root = np.sqrt(settings.regularization)
-    u_ref = np.zeros(model.n_u) if u_ref is None else np.asarray(u_ref, float)
-    u_start = u.copy()
+    u_start = u.copy() if u_box is None else np.asarray(u_box, float)
 
     def cost(q, u):
-        return float(np.sum((W @ (model.X + q) - goal) ** 2) + np.sum((root * (u - u_ref)) ** 2))
+        return _objective(model, settings, targets, q, u, u_ref)
+
+    u_ref = np.zeros(model.n_u) if u_ref is None else np.asarray(u_ref, float)
 
     start_q, start_u = q, u
     fac = tangent_factorization(model, q, u)
