@@ -101,11 +101,15 @@ def _solver(model, settings: ReachSettings) -> EquilibriumNLP:
     key = (np.asarray(settings.extra_points, dtype=float).tobytes(), settings.regularization)
     cache = model.__dict__.setdefault("_tracking_nlps", {})
     if key not in cache:
-        points = None
-        if settings.extra_points:
-            points = np.vstack([model.p0[None], np.asarray(settings.extra_points, float)])
-        cache[key] = tracking(model, points=points, rho=settings.regularization)
+        cache[key] = tracking(model, points=_rest_points(model, settings), rho=settings.regularization)
     return cache[key]
+
+
+def _rest_points(model, settings):
+    """Rest positions (k, 3) of the tip and the extra points, in the order of ``targets``; None: the tip."""
+    if not settings.extra_points:
+        return None
+    return np.vstack([model.p0[None], np.asarray(settings.extra_points, float)])
 
 
 def reach(problem_or_model, target, q0=None, u0=None, settings: ReachSettings | None = None,
@@ -123,9 +127,11 @@ def reach(problem_or_model, target, q0=None, u0=None, settings: ReachSettings | 
     if settings.method not in ("reduced", "ipopt"):
         raise ValueError(f"unknown reach method {settings.method!r}; expected 'reduced' or 'ipopt'")
     if settings.method == "reduced":
-        r = _reduced(model, targets, q0, u0, settings, u_ref)
+        pts = _rest_points(model, settings)
+        W = model.C if pts is None else model.embedding(pts)  # positions W (X + q)
+        r = _reduced(model, W, targets, q0, u0, settings, u_ref)
         if r.status == Status.CONVERGED and not r.reachable:
-            r = _restart_from_the_middle(model, targets, q0, u0, settings, u_ref, r)
+            r = _restart_from_the_middle(model, W, targets, q0, u0, settings, u_ref, r)
         if r.status == Status.CONVERGED:
             return r
         # Gauss-Newton stalled (a cable that the others' pull keeps slack turns its steps aside): the
@@ -169,7 +175,7 @@ def _ipopt(model, targets, q0, u0, settings: ReachSettings, u_ref) -> ReachResul
                        method="ipopt")
 
 
-def _restart_from_the_middle(model, targets, q0, u0, settings, u_ref, r: ReachResult) -> ReachResult:
+def _restart_from_the_middle(model, W, targets, q0, u0, settings, u_ref, r: ReachResult) -> ReachResult:
     """Gauss-Newton once more, from the middle of the inputs allowed; the better of the two answers.
 
     A target Gauss-Newton did not reach may lie beyond a local minimum of the distance: the pinch gripper's
@@ -182,41 +188,32 @@ def _restart_from_the_middle(model, targets, q0, u0, settings, u_ref, r: ReachRe
     mid = solve_equilibrium(model, (lo + hi) / 2, q0=q0, u0=u0)
     if mid.status != CONVERGED:
         return r
-    r2 = _reduced(model, targets, mid.q, mid.u, settings, u_ref, u_box=u0)
+    r2 = _reduced(model, W, targets, mid.q, mid.u, settings, u_ref, u_box=u0)
     r2.iterations += r.iterations
     r.iterations = r2.iterations
-    better = _objective(model, settings, targets, r2.q, r2.u, u_ref) < \
-        (1 - 1e-9) * _objective(model, settings, targets, r.q, r.u, u_ref)
+    better = _objective(model, W, settings, targets, r2.q, r2.u, u_ref) < \
+        (1 - 1e-9) * _objective(model, W, settings, targets, r.q, r.u, u_ref)
     return r2 if r2.status == Status.CONVERGED and better else r
 
 
-def _objective(model, settings, targets, q, u, u_ref) -> float:
-    """sum_i |p_i(q) - t_i|^2 + rho |u - u_ref|^2 (u_ref None: 0)."""
-    p = _points(model, settings) @ (model.X + q)
+def _objective(model, W, settings, targets, q, u, u_ref) -> float:
+    """sum_i |p_i(q) - t_i|^2 + rho |u - u_ref|^2 (u_ref None: 0), the points' positions W (X + q)."""
     ref = np.zeros(model.n_u) if u_ref is None else np.asarray(u_ref, float)
-    return float(np.sum((p - targets.ravel()) ** 2) + settings.regularization * np.sum((u - ref) ** 2))
+    return float(np.sum((W @ (model.X + q) - targets.ravel()) ** 2)
+                 + settings.regularization * np.sum((u - ref) ** 2))
 
 
-def _points(model, settings):
-    """W (3k x n_dof): the tip and the extra points (positions W (X + q), in the order of ``targets``)."""
-    if not settings.extra_points:
-        return model.C
-    return model.embedding(np.vstack([model.p0[None], np.asarray(settings.extra_points, float)]))
-
-
-def _reduced(model, targets, q, u, settings: ReachSettings, u_ref, u_box=None) -> ReachResult:
-    """Gauss-Newton in u from the verified equilibrium (q, u); see the module's docstring. ``u_box``: the
-    centre of the ``max_du`` box (default u)."""
-    W = _points(model, settings)
+def _reduced(model, W, targets, q, u, settings: ReachSettings, u_ref, u_box=None) -> ReachResult:
+    """Gauss-Newton in u from the verified equilibrium (q, u), the points' positions W (X + q); see the
+    module's docstring. ``u_box``: the centre of the ``max_du`` box (default u)."""
     Wf = W[:, model.free].tocsr()
     goal = targets.ravel()
     root = np.sqrt(settings.regularization)
     u_start = u.copy() if u_box is None else np.asarray(u_box, float)
+    u_ref = np.zeros(model.n_u) if u_ref is None else np.asarray(u_ref, float)
 
     def cost(q, u):
-        return _objective(model, settings, targets, q, u, u_ref)
-
-    u_ref = np.zeros(model.n_u) if u_ref is None else np.asarray(u_ref, float)
+        return _objective(model, W, settings, targets, q, u, u_ref)
 
     start_q, start_u = q, u
     fac = tangent_factorization(model, q, u)
@@ -241,14 +238,15 @@ def _reduced(model, targets, q, u, settings: ReachSettings, u_ref, u_box=None) -
             guess = q.copy()
             guess[model.free] += S @ du
             eq = solve_equilibrium(model, u_new, q0=q, u0=u, guess=guess)
-            if eq.status == CONVERGED and cost(eq.q, u_new) < f:
+            f_new = cost(eq.q, u_new) if eq.status == CONVERGED else np.inf
+            if f_new < f:
                 break
             du = du / 2
         else:
             status = Status.SOLVE_FAILED if not moved_once else Status.ITERATION_LIMIT
             break
         moved_once = True
-        q, u, f = eq.q, u_new, cost(eq.q, u_new)
+        q, u, f = eq.q, u_new, f_new
         fac = eq.factorization if eq.factorization is not None else tangent_factorization(model, q, u)
     if not moved_once and status == Status.SOLVE_FAILED:
         q, u = start_q, start_u
