@@ -87,6 +87,26 @@ def test_curvature_is_the_second_derivative_of_the_equilibrium_path():
     assert np.abs(A_refined - A_exact).max() < 0.1 * np.abs(A_near - A_exact).max()
 
 
+def test_a_failed_second_order_prediction_falls_back_to_the_linear_one_not_to_continuation():
+    # on the 10-node trunk bent double, the second-order predictor can land where K is indefinite and Newton
+    # diverges from it; Newton from the linear predictor then costs ~3 LUs, the continuation from q ~8
+    from casadi_ws.workspace.backward import _equilibrium
+
+    m = StaticModel(small_trunk("corotational", n_cables=2))
+    u, du = np.array([30.0, 10.0]), np.array([6.0, 0.0])
+    eq = solve_equilibrium(m, u)
+    _, S = sensitivity(m, eq.q, tangent_factorization(m, eq.q, u))
+    exact = solve_equilibrium(m, u + du, q0=eq.q, u0=u, tol=1e-11)
+    wrong = 0.01 * np.random.default_rng(0).standard_normal(m.n_free)  # a curvature term 1 cm off
+    guess = eq.q.copy()
+    guess[m.free] += S @ du + wrong
+    alone = solve_equilibrium(m, u + du, q0=eq.q, u0=u, guess=guess)
+    assert alone.load_steps > 0  # Newton failed from it: the continuation took over
+    res = _equilibrium(m, eq.q, u, u + du, S @ du, wrong)
+    assert res.converged and res.load_steps == 0 and res.factorizations < alone.factorizations
+    assert np.abs(res.q - exact.q).max() < 1e-8
+
+
 def test_single_precision_lu_gives_double_precision_sensitivities_and_is_refused_when_inaccurate(rng):
     pb = small_trunk("corotational", n_cables=2)
     m = StaticModel(pb)
