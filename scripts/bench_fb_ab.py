@@ -1,6 +1,7 @@
 """Forward-backward time of this tree against an earlier revision, interleaved on the same machine.
 
     python scripts/bench_fb_ab.py [--base 03d6aab] [--problems 2 3 4] [--repeats 1]
+    python scripts/bench_fb_ab.py --base 8569c8e --problems 2 3 trunk_2cables_order2 trunk_2cables_fine
 
 The issue that set "no slower than 15 / 37 / 82 s" measured those times on another day; this machine's
 speed varies by up to ~30 % between runs. So both codes run here, one after the other per problem (base,
@@ -56,7 +57,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--base", default="03d6aab", help="git revision to compare with (default: the code of "
                     "the day the FB-completeness issue was filed)")
-    ap.add_argument("--problems", type=int, nargs="+", default=[2, 3, 4])
+    ap.add_argument("--problems", nargs="+", default=["2", "3", "4"],
+                    help="n for problems/trunk_<n>cables.yaml, or the name of a file in problems/")
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--section", default="fb-ab")
     ap.add_argument("--issue", default="FB that misses nothing", help="the issue named in the section's title")
@@ -75,7 +77,7 @@ def main():
                        capture_output=True)
         try:
             for n in args.problems:
-                problem = ROOT / "problems" / f"trunk_{n}cables.yaml"
+                problem = ROOT / "problems" / (f"trunk_{n}cables.yaml" if n.isdigit() else f"{n}.yaml")
                 old, new = [], []
                 for _ in range(args.repeats):
                     old.append(run(base, problem))
@@ -99,16 +101,17 @@ def main():
         f"## Forward-backward, this code against `{base_rev}` (issue: {args.issue}) — "
         f"`scripts/bench_fb_ab.py --base {args.base}`",
         "",
-        f"Machine: {machine()}. Problems `problems/trunk_{{2,3,4}}cables.yaml`, 4 mm grid, 2 worker processes, "
+        f"Machine: {machine()}. Problems in `problems/`, each at its default grid step, 2 worker processes, "
         f"default settings. Runs interleaved (base, this code) per problem, {args.repeats} of each; times are "
         f"means. This code: `{head_rev}`.",
         "",
-        f"| n_u | `{base_rev}` | this code | time ratio |",
+        f"| problem | `{base_rev}` | this code | time ratio |",
         "|---|---|---|---|",
     ]
     for n, old, new in rows:
         ratio = sum(r["time"] for r in new) / sum(r["time"] for r in old)
-        lines.append(f"| {n} | {cell(old)} | {cell(new)} | {ratio:.2f} |")
+        name = f"`trunk_{n}cables`" if n.isdigit() else f"`{n}`"
+        lines.append(f"| {name} | {cell(old)} | {cell(new)} | {ratio:.2f} |")
     write_section(args.section, "\n".join(lines))
 
 
