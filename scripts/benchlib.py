@@ -85,4 +85,5 @@ def run_in_fresh_process(script: str, args: list) -> dict:
                          cwd=Path(script).resolve().parent)
     if out.returncode != 0:
         raise RuntimeError(out.stderr[-3000:])
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    # (the last JSON line: MUMPS writes "JOB=-2" lines to the C stdout when a solver is destroyed)
+    return json.loads([ln for ln in out.stdout.strip().splitlines() if ln.startswith("{")][-1])
