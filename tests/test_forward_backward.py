@@ -14,7 +14,7 @@ from casadi_ws.solvers.equilibrium import Factorization, factorize
 from casadi_ws.workspace.forward import ForwardSettings, forward
 from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
 from casadi_ws.solvers.equilibrium import tangent_factorization
-from casadi_ws.solvers.sensitivity import bounded_step, curvature, second_order, sensitivity
+from casadi_ws.solvers.sensitivity import TangentProducts, bounded_step, curvature, second_order, sensitivity
 from casadi_ws.workspace.interval import NEIGHBOURS, Grid, interval_box, neighbourhood
 
 
@@ -85,6 +85,53 @@ def test_curvature_is_the_second_derivative_of_the_equilibrium_path():
     A_near, _ = sensitivity(m, ex.q, at_predictor)
     A_refined, _ = sensitivity(m, ex.q, at_predictor, m.residual_and_tangent(ex.q, u + du)[1])
     assert np.abs(A_refined - A_exact).max() < 0.1 * np.abs(A_near - A_exact).max()
+
+
+def test_tangent_products_by_differences_refine_s_and_q_as_the_assembled_tangent_does():
+    # FB refines a reached configuration's S and Q (from the LU at its predictor) against the tangent at the
+    # answer; the products by residual differences must do what the assembled K does, to the LU's round-off
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    u = np.array([30.0, 10.0])
+    eq = solve_equilibrium(m, u, tol=1e-11)
+    K = m.residual_and_tangent(eq.q, u)[1]
+    V = np.random.default_rng(1).standard_normal((m.n_free, 3))
+    KV = TangentProducts(m, eq.q, u) @ V
+    assert np.abs(KV - K @ V).max() < 1e-5 * np.abs(K @ V).max()
+    du = np.array([6.0, 0.0])
+    fac0 = tangent_factorization(m, eq.q, u)
+    S0 = sensitivity(m, eq.q, fac0)[1]
+    guess = quad_predictor(m, eq.q, S0, curvature(m, eq.q, u, S0, fac0, 0.004), du)
+    ex = solve_equilibrium(m, u + du, q0=eq.q, u0=u, tol=1e-11)
+    near = Factorization(factorize(m.residual_and_tangent(guess, u + du)[1]), guess)
+    K_ex = m.residual_and_tangent(ex.q, u + du)[1]
+    A_k, S_k = sensitivity(m, ex.q, near, K_ex)
+    A_d, S_d = sensitivity(m, ex.q, near, TangentProducts(m, ex.q, u + du))
+    assert np.abs(A_d - A_k).max() < 1e-6 * np.abs(A_k).max()
+    Q_k = curvature(m, ex.q, u + du, S_k, near, 0.004, K_ex)
+    Q_d = curvature(m, ex.q, u + du, S_d, near, 0.004, TangentProducts(m, ex.q, u + du))
+    assert np.abs(Q_d - Q_k).max() < 1e-4 * np.abs(Q_k).max()
+
+
+def test_fb_with_tangent_products_by_differences_reaches_the_same_cells():
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    runs = [forward_backward(pb, FBSettings(step=0.005, progress=False, backward=BackwardSettings(tangent_products=k)),
+                             model=m) for k in ("assembled", "differences")]
+    a, b = ({tuple(c) for c in r.arrays["cells"]} for r in runs)
+    assert a == b
+    assert abs(runs[1].counters["factorizations"] - runs[0].counters["factorizations"]) <= 0.02 * len(a)
+    # auto: by differences where their residuals cost less than 3/4 of an assembled tangent
+    from types import SimpleNamespace
+
+    from casadi_ws.fem.elements import TET4, TET10
+    from casadi_ws.workspace.forward_backward import _by_differences
+    auto = BackwardSettings()
+    assert [_by_differences(SimpleNamespace(n_u=n, element=TET10), auto) for n in (1, 2, 3)] == [True, True, False]
+    assert [_by_differences(SimpleNamespace(n_u=n, element=TET4), auto) for n in (1, 2)] == [True, False]
+    with pytest.raises(ValueError, match="tangent_products"):
+        forward_backward(pb, FBSettings(step=0.005, progress=False, backward=BackwardSettings(tangent_products="x")),
+                         model=m)
 
 
 def test_a_failed_second_order_prediction_falls_back_to_the_linear_one_not_to_continuation():

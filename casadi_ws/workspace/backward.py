@@ -64,6 +64,15 @@ class BackwardSettings:
     (:func:`casadi_ws.solvers.sensitivity.curvature`: n_u(n_u + 1) residuals and a solve with n_u(n_u + 1)/2
     right-hand sides per reached cell), so that its Newton solve needs one LU. False: the linear predictor
     q + S du, whose Newton solve then needs a second LU where the body rotates (BENCHMARKS.md, "second-order")."""
+    tangent_products: str = "auto"
+    """Reduced, in the forward-backward method: how a reached configuration's S and Q (computed with the LU
+    at its last predictor, one Newton iterate away) are refined against the tangent K at the answer.
+    ``assembled``: K assembled there. ``differences``: the products K v by forward differences of the
+    residual (:class:`casadi_ws.solvers.sensitivity.TangentProducts`; 2 n_u + n_u(n_u + 1)/2 + 1 residuals,
+    relative error ~1e-7). ``auto``: differences where they cost at most 3/4 of an assembled tangent by the
+    element's ``tangent_cost``: 10-node tetrahedra with up to two inputs, 4-node ones with one. Measured
+    (BENCHMARKS.md "tangent-products"): the 10-node 2-cable trunk took 0.89 of the time for the same
+    cells; on the linear trunk differences cost the same at 2 inputs and 6 % more at 3."""
     give_up: float | None = None
     """Reduced: stop (status 3) when, from the second iterate on, the linearised closest point (the bounded
     least-squares step's prediction) lies more than (0.5 + give_up) steps from the target in some

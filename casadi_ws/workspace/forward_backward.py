@@ -37,7 +37,7 @@ from ..runtime.executor import Executor, deferred_interrupt, make_executor, one_
 from ..runtime.run_state import RunState, fingerprint
 from ..solvers.admissible import VIOLATIONS, admissibility, decode
 from ..solvers.equilibrium import CONVERGED, solve_equilibrium, tangent_factorization
-from ..solvers.sensitivity import bounded_step, closest_to_box, curvature, input_range, sensitivity
+from ..solvers.sensitivity import TangentProducts, bounded_step, closest_to_box, curvature, input_range, sensitivity
 from ..status import Status
 from .backward import BackwardSettings, backward
 from .boundary import BoundarySettings, boundary
@@ -158,9 +158,24 @@ def _derivatives(model, q, u, fac, eta, bsettings):
     at q, when the LU was computed elsewhere: at the predictor, one iterate away) only for the reduced
     backward, whose predictor they feed (IPOPT's has none), Q only if it predicts to second order."""
     reduced = bsettings.formulation == "reduced"
-    K = None if (np.array_equal(fac.q, q) or not reduced) else model.residual_and_tangent(q, u)[1]
+    if np.array_equal(fac.q, q) or not reduced:
+        K = None
+    elif _by_differences(model, bsettings):
+        K = TangentProducts(model, q, u)
+    else:
+        K = model.residual_and_tangent(q, u)[1]
     A, S = sensitivity(model, q, fac, K)
     return A, S, (curvature(model, q, u, S, fac, eta, K) if reduced and bsettings.second_order else None)
+
+
+def _by_differences(model, bsettings) -> bool:
+    """Whether the tangent at a reached configuration is applied by differences of residuals (see
+    ``BackwardSettings.tangent_products``)."""
+    if bsettings.tangent_products != "auto":
+        return bsettings.tangent_products == "differences"
+    n = model.n_u
+    products = 2 * n + 1 + (n * (n + 1) // 2 if bsettings.second_order else 0)
+    return products <= 0.75 * model.element.tangent_cost
 
 
 class Exploration:
@@ -439,6 +454,9 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
         settings.step = float(step)
     if settings.strategy not in ("uniform", "relative"):
         raise ValueError(f"strategy must be 'uniform' or 'relative', got {settings.strategy!r}")
+    if settings.backward.tangent_products not in ("auto", "assembled", "differences"):
+        raise ValueError(f"backward.tangent_products must be 'auto', 'assembled' or 'differences', "
+                         f"got {settings.backward.tangent_products!r}")
     with one_blas_thread():
         t0 = time.perf_counter()
         model = model or StaticModel(problem)
