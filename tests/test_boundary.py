@@ -134,6 +134,19 @@ def fb_dir(tmp_path_factory):
     return r, d
 
 
+def test_face_nodes_start_from_the_nearest_reached_configurations(trunk3):
+    # seeded by forward-backward's configurations, the same surface (to the equilibria's tolerance) for fewer LUs
+    pb = small_trunk(n_cables=3)
+    r = forward_backward(pb, FBSettings(step=0.006, progress=False), model=trunk3)
+    b = r.boundary
+    assert b.counters["seeded_nodes"] == b.counters["solved_nodes"] == 98
+    cold = boundary(trunk3, BoundarySettings())
+    assert cold.counters["seeded_nodes"] == 0
+    assert b.counters["factorizations"] < 0.8 * cold.counters["factorizations"]
+    assert np.abs(b.vertices - cold.vertices).max() < 1e-6
+    assert abs(b.volume - cold.volume) < 1e-6 * abs(cold.volume)
+
+
 def test_forward_backward_reports_the_boundary_volume_and_maps(fb_dir):
     r, d = fb_dir
     m = r.measures
@@ -224,6 +237,6 @@ def test_a_forward_grid_gives_the_surface_without_a_solve(trunk3):
     pb = trunk3.problem
     res = forward(pb, settings=ForwardSettings(n_d=5, progress=False), model=trunk3)
     b = boundary_of(res, pb, model=trunk3)
-    assert b.counters == {"solved_nodes": 0, "known_nodes": 98, "factorizations": 0}
+    assert b.counters == {"solved_nodes": 0, "known_nodes": 98, "seeded_nodes": 0, "factorizations": 0}
     assert b.closed and b.checks["points_outside"] == 0
     assert b.volume == pytest.approx(boundary(trunk3, BoundarySettings(n=5)).volume, rel=1e-9)

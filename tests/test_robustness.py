@@ -146,6 +146,8 @@ def test_killed_run_resumes_to_the_same_result(tmp_path, method, args):
     if method == "fb":
         for k in ("explored", "feasible", "iterations", "backward_solves"):
             assert a.counters[k] == b.counters[k], k
+        # the surface's face nodes start from the same seeds (kept in the checkpoint)
+        np.testing.assert_array_equal(a.boundary.vertices, b.boundary.vertices)
     assert not (out / "checkpoint.npz").exists()
     # --resume on a finished result: its summary, nothing recomputed
     r = subprocess.run(_cli(*base, "--out", out, "--resume"), capture_output=True, text=True)

@@ -40,7 +40,7 @@ from ..solvers.equilibrium import CONVERGED, solve_equilibrium, tangent_factoriz
 from ..solvers.sensitivity import TangentProducts, bounded_step, closest_to_box, curvature, input_range, sensitivity
 from ..status import Status
 from .backward import BackwardSettings, backward
-from .boundary import BoundarySettings, boundary
+from .boundary import BoundarySettings, Seeds, boundary
 from .interval import Grid, default_step, interval_box, neighbourhood
 from .maps import point_maps, stack
 from .result import WorkspaceResult, describe
@@ -205,6 +205,9 @@ class Exploration:
         self.failed_targets, self.failed_status, self.failed_closest = [], [], []
         self.excluded = []  # (tip, u, violation mask) of the verified answers that are not admissible
         self.frontier = [start]
+        # the boundary surface's face nodes start from the reached configurations nearest to them
+        self.seeds = Seeds(model, settings.boundary) if settings.boundary.enabled else None
+        self._seed(start)
 
     # ------------------------------------------------------------------ the steps
     def eta(self, cfg) -> float:
@@ -323,11 +326,16 @@ class Exploration:
                     if not on_target:
                         self.counters["adopted"] += 1
                     new = _Config(cell, tip, q, u, A, S, Q, viol, maps)
+                    self._seed(new)
                     new_frontier.append(new)
                     self.reached.append(new)
                     self.reached_cells.add(cell)
             cfg.S = cfg.Q = None  # expanded: no longer needed
         return new_frontier
+
+    def _seed(self, cfg) -> None:
+        if self.seeds is not None and not cfg.violations:
+            self.seeds.offer(cfg.u, cfg.q, cfg.S)
 
     def _exclude(self, tip, u, violations: int) -> None:
         self.excluded.append((tip, u, violations))
@@ -380,6 +388,8 @@ class Exploration:
                       excluded_violations=np.array([e[2] for e in self.excluded], dtype=np.int64))
         if self.settings.store_states:
             arrays["q"] = np.array([c.q for c in reached])
+        if self.seeds is not None:
+            arrays.update(self.seeds.arrays())
         if all(reached[i].Q is not None for i in fr):  # reduced backward
             arrays["frontier_Q"] = np.array([reached[i].Q for i in fr], dtype=np.float32).reshape(
                 len(fr), m.n_u * (m.n_u + 1) // 2, m.n_free)
@@ -407,6 +417,8 @@ class Exploration:
         for i, c in enumerate(self.reached):
             c.maps = {k[4:]: a[k][i] for k in a if k.startswith("map_")}
         self.excluded = list(zip(a["excluded_p"], a["excluded_u"], (int(v) for v in a["excluded_violations"])))
+        if self.seeds is not None:
+            self.seeds.restore(a)
 
     def result(self, build_model: float) -> WorkspaceResult:
         self.counters["stopped_at_max_cells"] = bool(self.frontier)
@@ -464,12 +476,11 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
         if settings.step is None:
             settings.step = default_step(model)
         # the budget is not part of the answer: a run stopped by it resumes with a larger one
-        # checkpoint format 6: the contact map (5: maps with the actuators' intensities; 4: reached points carry their maps,
-        # failures their closest points; 2: frontiers
-        # carry Q); an older checkpoint would resume without them and so end
-        # with another result than an uninterrupted run
+        # checkpoint format 7: the boundary surface's seeds (6: the contact map; 5: maps with the actuators'
+        # intensities; 4: reached points carry their maps, failures their closest points; 2: frontiers carry Q);
+        # an older checkpoint would resume without them and so end with another result than an uninterrupted run
         fp = fingerprint("forward-backward", model, asdict(settings) | {"workers": None, "progress": None,
-                                                                         "max_cells": None, "format": 6})
+                                                                         "max_cells": None, "format": 7})
         run = RunState(checkpoint_dir, "forward-backward", fp, resume, t0)
 
         own = executor is None
@@ -498,7 +509,7 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
             surface = None
             if settings.boundary.enabled and not ex.frontier:
                 t = time.perf_counter()
-                surface = boundary(model, settings.boundary, executor=executor, problem=problem)
+                surface = boundary(model, settings.boundary, executor=executor, problem=problem, seeds=ex.seeds)
                 surface.check_points(np.array([c.p for c in ex.reached]))
                 ex.timings["boundary"] = time.perf_counter() - t
         finally:
