@@ -4,6 +4,7 @@ result files read back by meshio, and the interactive report rendered by a real 
 import csv
 import itertools
 import shutil
+from types import SimpleNamespace
 
 import meshio
 import numpy as np
@@ -12,7 +13,7 @@ import pytest
 from casadi_ws.fem.model import StaticModel
 from casadi_ws.solvers.equilibrium import solve_equilibrium, tangent_factorization
 from casadi_ws.solvers.sensitivity import sensitivity
-from casadi_ws.workspace.boundary import BoundarySettings, _closed, boundary, distance_outside
+from casadi_ws.workspace.boundary import BoundarySettings, Seeds, _closed, boundary, distance_outside
 from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
 from casadi_ws.workspace.maps import point_maps
 from casadi_ws.workspace.measures import measures
@@ -145,6 +146,16 @@ def test_face_nodes_start_from_the_nearest_reached_configurations(trunk3):
     assert b.counters["factorizations"] < 0.8 * cold.counters["factorizations"]
     assert np.abs(b.vertices - cold.vertices).max() < 1e-6
     assert abs(b.volume - cold.volume) < 1e-6 * abs(cold.volume)
+
+
+def test_seeds_ignore_an_input_without_range_and_more_than_three_inputs():
+    # a fixed input (u_min == u_max) has no surface to seed, nor have 4 inputs: no nodes, offers are no-ops
+    for lo, hi in (([0.0, 0.0, 0.0], [1.0, 0.0, 1.0]), ([0.0] * 4, [1.0] * 4)):
+        model = SimpleNamespace(u_min=np.array(lo), u_max=np.array(hi), n_u=len(lo))
+        s = Seeds(model, BoundarySettings())
+        with np.errstate(all="raise"):
+            s.offer(np.array(hi), np.zeros(3), np.zeros((3, 3)))
+        assert len(s.nodes) == 0 and s.of() == {} and len(s.arrays()["seed_u"]) == 0
 
 
 def test_forward_backward_reports_the_boundary_volume_and_maps(fb_dir):

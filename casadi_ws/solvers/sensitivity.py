@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["TangentProducts", "bounded_step", "closest_to_box", "curvature", "input_range", "limited_step", "second_order", "sensitivity"]
+__all__ = ["TangentProducts", "bounded_step", "closest_to_box", "curvature", "input_range", "limited_step",
+           "second_order", "sensitivity"]
 
 
 def sensitivity(model, q, fac, K=None) -> tuple[np.ndarray, np.ndarray]:
