@@ -163,7 +163,7 @@ class Seeds:
     def __init__(self, model, settings: BoundarySettings):
         self.lo, self.span = model.u_min, model.u_max - model.u_min
         n_u, n = model.n_u, int(settings.n)
-        faces = [] if np.any(~(self.span > 0)) else [(0, 1, {})] if n_u == 2 else two_faces(n_u) if n_u == 3 else []
+        faces = two_faces(n_u) if n_u in (2, 3) and np.all(self.span > 0) else []  # (2 inputs: the one face)
         self.nodes = (np.unique(np.concatenate([_face_nodes(f, n, n_u).reshape(-1, n_u) for f in faces]), axis=0)
                       if faces else np.zeros((0, n_u)))
         self.dist = np.full(len(self.nodes), np.inf)
