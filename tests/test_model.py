@@ -117,6 +117,32 @@ def test_the_four_node_corotational_stiffness_in_closed_form_is_the_jacobian_of_
     assert np.abs(H - H_ref).max() < 1e-12 * np.abs(H_ref).max()
 
 
+@pytest.mark.skipif(not have_compiler(), reason="no C compiler")
+@pytest.mark.parametrize("regions", [False, True])
+def test_the_stiffness_summed_as_computed_is_the_assembled_one_to_the_bit(regions, rng):
+    """The compiled stiffness kernels add each element's K_e into the pattern as they compute it; the sums
+    are those of assembling the whole batch (a kernel on threads or without a compiler), bit for bit, with
+    one law and with two (each law's elements summed apart)."""
+    pb = small_trunk("corotational")
+    if regions:
+        lower = np.flatnonzero(pb.mesh.nodes[pb.mesh.tets].mean(axis=1)[:, 2] < 0.1)
+        pb.regions = [(lower, Material("neohookean", 3e7, 0.45, 1100.0))]
+    m = StaticModel(pb)
+    assert len(m.element_groups) == (2 if regions else 1)
+    q = np.zeros(m.n_dof)
+    q[m.free] = rng.normal(size=m.n_free) * 1e-4
+    whole = None
+    for g in m.element_groups:
+        ke, = g.stiff(q[g.edofs], g.Xe, g.Ge, g.Pe)
+        slot = m._k_slot.reshape(m.mesh.n_tets, -1)
+        part = np.bincount((slot if g.index is None else slot[g.index]).ravel(), weights=ke.ravel(),
+                           minlength=m._k_nnz + 1)
+        whole = part if whole is None else whole + part
+    assert np.array_equal(m._stiffness_data(q), whole)
+    K = m.element_stiffness(q)
+    assert np.array_equal(K.data, whole[: m._k_nnz])
+
+
 def _patch_problem(model, order=1):
     mesh = box_mesh((1.0, 1.0, 1.0), (3, 3, 3) if order == 1 else (2, 2, 2))
     if order == 2:

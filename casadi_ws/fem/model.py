@@ -391,6 +391,7 @@ class StaticModel:
         n_el = keys[0].size
         self._k_slot = np.full(keep.size, ukey.size, dtype=np.int64)
         self._k_slot[keep] = slot[:n_el]
+        self.__dict__.pop("_k_slot32", None)  # the kernels' int32 copies (:meth:`_stiffness_data`), rebuilt on use
         self._act_slots = slot[n_el:n_el + n_act_keys]
         border = slot[n_el + n_act_keys:n_el + n_act_keys + n_border_keys]
         self._ukey = ukey
@@ -458,16 +459,33 @@ class StaticModel:
 
     def element_stiffness(self, q: np.ndarray) -> sp.csc_matrix:
         """df_int/dq on the free dofs."""
-        ke, = self._element_values(q, "stiff")
-        return self.assemble(ke)
+        return self.assemble(None, data=self._stiffness_data(q))
 
-    def assemble(self, ke: np.ndarray, actuator_weights: np.ndarray | None = None, border=None,
-                 terms=()) -> sp.csc_matrix:
-        """The free-dof matrix from element matrices ke (m, n_dof_e^2), plus actuator Hessian entries and
+    def _stiffness_data(self, q: np.ndarray) -> np.ndarray:
+        """The element stiffnesses at q summed into the pattern's slots (k_nnz + 1: the fixed dofs' entries
+        last), by each group's kernel as it computes them (:meth:`ElementBatch.scatter`); group by group, so
+        the sums do not depend on how a kernel runs."""
+        if "_k_slot32" not in self.__dict__:
+            m = self.mesh.n_tets
+            self._k_slot32 = [np.ascontiguousarray(
+                (self._k_slot.reshape(m, -1) if g.index is None else self._k_slot.reshape(m, -1)[g.index]).ravel(),
+                dtype=np.int32) for g in self.element_groups]
+        data = None
+        for g, slot in zip(self.element_groups, self._k_slot32):
+            part = g.stiff.scatter(slot, self._k_nnz + 1, q[g.edofs], g.Xe, g.Ge, g.Pe)
+            data = part if data is None else data + part
+        return data
+
+    def assemble(self, ke: np.ndarray | None, actuator_weights: np.ndarray | None = None, border=None,
+                 terms=(), data: np.ndarray | None = None) -> sp.csc_matrix:
+        """The free-dof matrix from element matrices ke (m, n_dof_e^2), or their sums ``data`` already taken
+        into the pattern's slots (:meth:`_stiffness_data`), plus actuator Hessian entries and
         the prescribed actuators' border values ((column, row, diagonal) per actuator) and the terms'
         (keys, values) (:meth:`casadi_ws.fem.terms.Term.tangent`) if given. The pattern is fixed (explicit
         zeros kept): factorisations reuse one ordering, and the CasADi Functions rely on it."""
-        data = np.bincount(self._k_slot, weights=ke.ravel(), minlength=self._k_nnz + 1)[: self._k_nnz]
+        if data is None:
+            data = np.bincount(self._k_slot, weights=ke.ravel(), minlength=self._k_nnz + 1)
+        data = data[: self._k_nnz]
         if actuator_weights is not None and actuator_weights.size:
             data += np.bincount(self._act_slots, weights=actuator_weights, minlength=self._k_nnz)
         for (cs, rs, ds), values in zip(self._border_slots, border or ()):
@@ -636,7 +654,7 @@ class StaticModel:
         coef = -self.sign * t  # R holds -sign_a t_a dQ_a/dq
         weights = (coef[self._act_of_entry] * self._act_h_weight * h[self._act_h_index]
                    if self._act else np.zeros(0))
-        fe, ke = self._element_values(q, "force stiff")
+        fe, = self._element_values(q, "force")
         R = (np.bincount(self._edofs.ravel(), weights=fe.ravel(), minlength=self.n_dof) + dQ.T @ coef
              - load * self.F)[self.free]
         dRdu = (dQ * -self.sign[:, None])[:, self.free].T
@@ -653,7 +671,7 @@ class StaticModel:
                 dRdu[self.n_free_mech + k, a] = -pb[k] * self.kappa[k]
         caches = [t.residual(self, q, u, R) for t in self.terms]
         terms = [t.tangent(self, c) for t, c in zip(self.terms, caches)]
-        return R, self.assemble(ke, weights, border, terms), dRdu
+        return R, self.assemble(None, weights, border, terms, data=self._stiffness_data(q)), dRdu
 
     def actuation_rows(self, q: np.ndarray) -> np.ndarray:
         """H(q) = sign dQ/dq on the free dofs, (n_u, n_free) (a cable's row: -dL/dq): where each actuator's
