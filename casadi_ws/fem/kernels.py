@@ -42,14 +42,16 @@ takes minutes on a single function of 100 MB. No shipped kernel is that large an
 
 _DRIVER = r"""
 #include <stddef.h>
+#define {name}_WORKSPACE \
+  casadi_int sz_arg, sz_res, sz_iw, sz_w; \
+  {name}_work(&sz_arg, &sz_res, &sz_iw, &sz_w); \
+  const casadi_real* arg[sz_arg + 1]; \
+  casadi_real* res[sz_res + 1]; \
+  casadi_int iw[sz_iw + 1]; \
+  casadi_real w[sz_w + 1];
 int {name}_batch(long m, int nin, const double** in, const long* in_stride,
                  int nout, double** out, const long* out_stride) {{
-  casadi_int sz_arg, sz_res, sz_iw, sz_w;
-  {name}_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
-  const casadi_real* arg[sz_arg + 1];
-  casadi_real* res[sz_res + 1];
-  casadi_int iw[sz_iw + 1];
-  casadi_real w[sz_w + 1];
+  {name}_WORKSPACE
   for (long e = 0; e < m; ++e) {{
     for (int i = 0; i < nin; ++i) arg[i] = in[i] + e * in_stride[i];
     for (int j = 0; j < nout; ++j) res[j] = out[j] + e * out_stride[j];
@@ -59,12 +61,7 @@ int {name}_batch(long m, int nin, const double** in, const long* in_stride,
 }}
 int {name}_scatter(long m, int nin, const double** in, const long* in_stride, long nout, const int* slot,
                    double* data) {{
-  casadi_int sz_arg, sz_res, sz_iw, sz_w;
-  {name}_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
-  const casadi_real* arg[sz_arg + 1];
-  casadi_real* res[sz_res + 1];
-  casadi_int iw[sz_iw + 1];
-  casadi_real w[sz_w + 1];
+  {name}_WORKSPACE
   casadi_real out[nout];
   res[0] = out;
   for (long j = 1; j <= sz_res; ++j) res[j] = 0;
