@@ -459,7 +459,7 @@ class StaticModel:
 
     def element_stiffness(self, q: np.ndarray) -> sp.csc_matrix:
         """df_int/dq on the free dofs."""
-        return self.assemble(None, data=self._stiffness_data(q))
+        return self.assemble(data=self._stiffness_data(q))
 
     def _stiffness_data(self, q: np.ndarray) -> np.ndarray:
         """The element stiffnesses at q summed into the pattern's slots (k_nnz + 1: the fixed dofs' entries
@@ -476,7 +476,7 @@ class StaticModel:
             data = part if data is None else data + part
         return data
 
-    def assemble(self, ke: np.ndarray | None, actuator_weights: np.ndarray | None = None, border=None,
+    def assemble(self, ke: np.ndarray | None = None, actuator_weights: np.ndarray | None = None, border=None,
                  terms=(), data: np.ndarray | None = None) -> sp.csc_matrix:
         """The free-dof matrix from element matrices ke (m, n_dof_e^2), or their sums ``data`` already taken
         into the pattern's slots (:meth:`_stiffness_data`), plus actuator Hessian entries and
@@ -671,7 +671,8 @@ class StaticModel:
                 dRdu[self.n_free_mech + k, a] = -pb[k] * self.kappa[k]
         caches = [t.residual(self, q, u, R) for t in self.terms]
         terms = [t.tangent(self, c) for t, c in zip(self.terms, caches)]
-        return R, self.assemble(None, weights, border, terms, data=self._stiffness_data(q)), dRdu
+        return R, self.assemble(actuator_weights=weights, border=border, terms=terms,
+                                data=self._stiffness_data(q)), dRdu
 
     def actuation_rows(self, q: np.ndarray) -> np.ndarray:
         """H(q) = sign dQ/dq on the free dofs, (n_u, n_free) (a cable's row: -dL/dq): where each actuator's
