@@ -310,6 +310,12 @@ class StaticModel:
         h = ca.vertcat(*hs)
         self._actuators_qg = ca.Function("actuators", [P], [Q, g])
         self._actuators_qgh = ca.Function("actuators_h", [P], [Q, g, h])
+        # compiled like the element kernels: a CasADi call and its DM conversions cost ~50-90 us, 5-9 % of a
+        # forward or forward-backward run on the linear trunk, whose element forces take ~130 us. Not a
+        # cavity's: its volume's Hessian over the whole wall is megabytes of C, minutes of compiling
+        small = max(self._actuators_qg.n_instructions(), self._actuators_qgh.n_instructions()) < 50_000
+        self._actuator_kernels = (ElementBatch(self._actuators_qg, "c"), ElementBatch(self._actuators_qgh, "c")) \
+            if self._act and self.backend == "c" and small else None
 
     def _points_matrix(self, actuator) -> sp.csr_matrix:
         """W (3k x 3n): the actuator's points from the nodal positions; points that are mesh nodes
@@ -331,13 +337,16 @@ class StaticModel:
         if not hessians and memo is not None and memo[0].shape == np.shape(q) and np.array_equal(memo[0], q):
             return memo[1]
         P = self._W_all @ (self.X + q)
-        out = (self._actuators_qgh if hessians else self._actuators_qg)(P)
+        if self._actuator_kernels is not None:
+            out = [v[0] for v in self._actuator_kernels[hessians](P[None])]
+        else:
+            out = [np.asarray(v).ravel() for v in (self._actuators_qgh if hessians else self._actuators_qg)(P)]
         G = np.zeros((self._g_rows.size, self.n_u))
-        G[self._g_rows, self._g_cols] = np.asarray(out[1]).ravel()
+        G[self._g_rows, self._g_cols] = out[1]
         dQ = (self._W_all_T @ G).T
-        values = np.asarray(out[0]).ravel()
+        values = out[0]
         if hessians:
-            return values, dQ, np.asarray(out[2]).ravel()
+            return values, dQ, out[2]
         values.flags.writeable = dQ.flags.writeable = False
         self._actuator_memo = (np.array(q, dtype=float, copy=True), (values, dQ, None))
         return values, dQ, None
