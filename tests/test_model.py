@@ -143,7 +143,7 @@ def test_the_four_node_corotational_stiffness_in_closed_form_is_the_jacobian_of_
 
 @pytest.mark.skipif(not have_compiler(), reason="no C compiler")
 @pytest.mark.parametrize("regions", [False, True])
-def test_the_stiffness_summed_as_computed_is_the_assembled_one_to_the_bit(regions, rng):
+def test_the_stiffness_and_forces_summed_as_computed_are_the_assembled_ones_to_the_bit(regions, rng):
     """The compiled stiffness kernels add each element's K_e into the pattern as they compute it; the sums
     are those of assembling the whole batch (a kernel on threads), bit for bit, with one law and with two
     (each law's elements summed apart); without a compiler, to round-off."""
@@ -168,6 +168,11 @@ def test_the_stiffness_summed_as_computed_is_the_assembled_one_to_the_bit(region
     # without a compiler the batch is computed whole by CasADi's virtual machine and summed by bincount
     K_vm = StaticModel(pb, backend="casadi").element_stiffness(q)
     assert np.abs(K_vm - K).max() < 1e-12 * np.abs(K.data).max()
+    # the forces too (one law: summed as computed, with their norm; two: the batch, then a bincount)
+    fe, = m._element_values(q, "force")
+    f, norm = m.internal_force(q, norm=True)
+    assert np.array_equal(f, np.bincount(m._edofs.ravel(), weights=fe.ravel(), minlength=m.n_dof))
+    assert abs(norm - np.linalg.norm(fe)) < 1e-14 * norm
 
 
 def _patch_problem(model, order=1):

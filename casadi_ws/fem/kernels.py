@@ -62,7 +62,7 @@ int {name}_batch(long m, int nin, const double** in, const long* in_stride,
   return 0;
 }}
 int {name}_scatter(long m, int nin, const double** in, const long* in_stride, long nout, const int* slot,
-                   double* data) {{
+                   double* data, double* sumsq) {{
   {name}_WORKSPACE
   casadi_real out[nout];
   res[0] = out;
@@ -72,6 +72,7 @@ int {name}_scatter(long m, int nin, const double** in, const long* in_stride, lo
     if ({name}(arg, res, iw, w, 0)) return 1;
     const int* s = slot + e * nout;
     for (long j = 0; j < nout; ++j) data[s[j]] += out[j];
+    if (sumsq) for (long j = 0; j < nout; ++j) *sumsq += out[j] * out[j];
   }}
   return 0;
 }}
@@ -122,7 +123,7 @@ int {name}_vbatch(long m, int nin, const double** in, const long* in_stride,
   return 0;
 }}
 int {name}_vscatter(long m, int nin, const double** in, const long* in_stride, long nout, const int* slot,
-                    double* data) {{
+                    double* data, double* sumsq) {{
   VD bin[{total_in}], bout[{total_out}];
   const VD* arg[{n_args}];
   VD* res[{n_res}];
@@ -134,6 +135,7 @@ int {name}_vscatter(long m, int nin, const double** in, const long* in_stride, l
     for (int l = 0; l < LANES && e0 + l < m; ++l) {{  /* element by element, as the scalar driver sums */
       const int* s = slot + (e0 + l) * nout;
       for (long j = 0; j < nout; ++j) data[s[j]] += bout[j][l];
+      if (sumsq) for (long j = 0; j < nout; ++j) *sumsq += bout[j][l] * bout[j][l];
     }}
   }}
   return 0;
@@ -333,9 +335,10 @@ class ElementBatch:
             list(_pool(threads).map(lambda k: self._run(ins, outs, cuts[k], cuts[k + 1]), range(threads)))
         return outs
 
-    def scatter(self, slot: np.ndarray, size: int, *inputs: np.ndarray) -> np.ndarray:
+    def scatter(self, slot: np.ndarray, size: int, *inputs: np.ndarray, sumsq: bool = False):
         """(size,) the sums of the first output's entries by ``slot`` (int32, one per entry, element-major):
-        ``np.bincount(slot, out.ravel(), size)`` without the (m, n_out) array.
+        ``np.bincount(slot, out.ravel(), size)`` without the (m, n_out) array. With ``sumsq``, also the sum
+        of the squares of the entries (the unassembled forces' norm, which a residual's scale needs).
 
         Why: a 4-node stiffness batch is 5 MB, written by the kernel and read back by the bincount with its
         slots (1 ms of the linear trunk's 3 ms tangent); summed as each element is computed, only the
@@ -347,7 +350,8 @@ class ElementBatch:
         if self._lib is None or self.fun.n_out() != 1 or (
                 m * n >= PARALLEL_OUTPUT and kernel_threads() > 1):
             out, = self(*inputs)
-            return np.bincount(slot, weights=out.ravel(), minlength=size)
+            data = np.bincount(slot, weights=out.ravel(), minlength=size)
+            return (data, float(np.dot(out.ravel(), out.ravel()))) if sumsq else data
         if slot.dtype != np.int32 or slot.size != m * n or not slot.flags.c_contiguous:
             raise ValueError(f"{self.fun.name()}: scatter needs {m * n} contiguous int32 slots")
         if not hasattr(self, "_scatter"):
@@ -355,12 +359,13 @@ class ElementBatch:
             self._scatter.restype = ctypes.c_int
         ins = [np.ascontiguousarray(a, dtype=float) for a in inputs]
         data = np.zeros(size)
+        ss = ctypes.c_double(0.0)
         in_stride = [a.shape[1] if a.ndim == 2 else 0 for a in ins]
         if self._scatter(ctypes.c_long(m), len(ins), (ctypes.c_void_p * len(ins))(*[a.ctypes.data for a in ins]),
                          (ctypes.c_long * len(ins))(*in_stride), ctypes.c_long(n), ctypes.c_void_p(slot.ctypes.data),
-                         ctypes.c_void_p(data.ctypes.data)):
+                         ctypes.c_void_p(data.ctypes.data), ctypes.byref(ss) if sumsq else None):
             raise RuntimeError(f"{self.fun.name()}: evaluation failed")
-        return data
+        return (data, ss.value) if sumsq else data
 
     def _run(self, ins, outs, start: int, stop: int) -> None:
         """Elements start..stop-1 of the batch into ``outs``."""
