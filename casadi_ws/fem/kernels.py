@@ -27,6 +27,7 @@ import functools
 import hashlib
 import os
 import platform
+import re
 import shutil
 import subprocess
 import tempfile
@@ -167,8 +168,6 @@ def _vector_code(code: str, fun: ca.Function) -> str:
     arithmetic and square roots are correctly rounded, no contraction into fused multiply-adds, the other
     functions are libm's, called lane by lane): the numbers are the scalar driver's to the bit.
     """
-    import re
-
     name = fun.name()
     match = re.search(r"static int casadi_f0\(const casadi_real\*\* arg, casadi_real\*\* res, casadi_int\* iw, "
                       r"casadi_real\* w, int mem\) \{\n(.*?)\n  return 0;\n\}", code, re.S)
@@ -259,8 +258,13 @@ def _build(fun: ca.Function, vector: bool = True) -> Path | None:
             if res.returncode == 0:
                 break
         else:
-            # a compiler without GCC's vector extensions: the scalar drivers
-            return _build(fun, vector=False) if lanes else None
+            # a compiler without GCC's vector extensions: the scalar drivers, kept under this key too, so
+            # that the next process does not try the lanes' build again
+            scalar = _build(fun, vector=False) if lanes else None
+            if scalar is not None:
+                shutil.copyfile(scalar, part)
+                os.replace(part, lib)
+            return scalar
         os.replace(part, lib)  # atomic: a concurrent process never loads a half-written library
         return lib
     finally:  # also when interrupted: no 100 MB sources left in the cache

@@ -648,7 +648,8 @@ class StaticModel:
         """
         Q, dQ, _ = self.actuator_terms(q)
         ext = (dQ.T @ (-self.sign * self.intensities(q, u)) - load * self.F)[self.free]
-        f_int, fe_norm = self.internal_force(q, norm=True)
+        out = self.internal_force(q, norm=with_scale)
+        f_int, fe_norm = out if with_scale else (out, None)
         R = f_int[self.free] + ext
         if self.n_lam:
             R[self.n_free_mech:self.n_free_mech + self.n_lam] = self._prescribed_rows(q, u, Q)[0]
