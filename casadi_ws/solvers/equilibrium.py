@@ -166,6 +166,10 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
             q_try = q.copy()
             q_try[free] += alpha * dq
             R_try, scale_try = model.residual(q_try, u, load, with_scale=True)
+            rel_try = np.linalg.norm(R_try) / scale_try
+            if rel_try < goal:  # verified: the simplified correction's solve would judge a step already done
+                q, rel = q_try, rel_try
+                return _Newton(q, CONVERGED, its, nfac, rel, fac)
             dq_bar = -fac.solve(R_try) if np.all(np.isfinite(R_try)) else None
             theta = np.linalg.norm(dq_bar) / size if dq_bar is not None else np.inf
             ok = bool(theta < 1.0 - alpha / 4.0)
@@ -174,11 +178,11 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
                 # Newton step beyond it, which the test judges, crosses the contact's switch and means little
                 ok = True
             if not ok and not fresh and np.isfinite(theta):
-                ok = bool(np.linalg.norm(R_try) / scale_try < 1e-2 * rel)
+                ok = bool(rel_try < 1e-2 * rel)
             if not ok and fresh and getattr(model, "has_contact", False) and np.isfinite(theta):
                 # a contact point grazing its surface (gap and force both ~0) makes the smoothed complementarity
                 # row all curvature: the Newton increments stop contracting while the residual still falls
-                ok = bool(np.linalg.norm(R_try) / scale_try < (1.0 - alpha / 4.0) * rel)
+                ok = bool(rel_try < (1.0 - alpha / 4.0) * rel)
             if ok or not fresh:
                 break
             alpha *= 0.5
@@ -186,7 +190,7 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
                 return stop(DIVERGED)
         # keep the factorisation while it contracts fast, or slowly but enough to finish in 3 cheap steps
         # (near the tolerance theta measures round-off, and a refactorisation would buy nothing)
-        rel_next = np.linalg.norm(R_try) / scale_try if ok else np.inf
+        rel_next = rel_try if ok else np.inf
         contracts = theta < 0.25 or rel_next < 0.2 * rel or (theta < 0.7 and rel_next * theta**3 < tol)
         need_fresh = not (ok and alpha == 1.0 and contracts)
         if ok:
