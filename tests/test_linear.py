@@ -40,7 +40,7 @@ def test_solutions_match_a_dense_solve(solver, single):
     b = np.random.default_rng(0).standard_normal((A.shape[0], 3))
     ref = np.linalg.solve(A.toarray(), b)
     lu = factorize(A, single, solver=solver)
-    tol = 1e-4 if lu.single else 1e-10  # single precision (SuperLU): the caller refines against lu.K
+    tol = 1e-4 if lu.single else 1e-10  # single precision: the caller refines against lu.K
     assert np.linalg.norm(lu.solve(b) - ref) < tol * np.linalg.norm(ref)
     assert np.linalg.norm(lu.solve(b[:, 0]) - ref[:, 0]) < tol * np.linalg.norm(ref[:, 0])
     assert lu.single == (lu.K is not None)
@@ -52,6 +52,18 @@ def test_the_inertia_of_an_indefinite_symmetric_matrix(solver):
     expected = int(np.count_nonzero(np.linalg.eigvalsh(A.toarray()) < 0))
     assert 0 < expected < A.shape[0]
     assert factorize(A, pivot_threshold=0.0, solver=solver).negative_pivots() == expected
+
+
+def test_pardisos_single_precision_is_kept_only_without_a_negative_pivot():
+    """Newton's single-precision L D L^T: kept for a positive definite K; where a pivot is negative (the
+    inertia the stability test reads, which round-off could decide) K is factorised again in double."""
+    B = _symmetric(shift=-2.0)
+    assert np.linalg.eigvalsh(B.toarray())[0] > 0
+    assert factorize(B, single=True, solver="pardiso").single
+    A = _symmetric(shift=3.0)
+    lu = factorize(A, single=True, solver="pardiso")
+    assert not lu.single and lu.K is None
+    assert lu.negative_pivots() == int(np.count_nonzero(np.linalg.eigvalsh(A.toarray()) < 0))
 
 
 def test_an_unsymmetric_matrix_gets_an_lu_and_no_inertia():

@@ -197,12 +197,12 @@ def _state_limits(model, q, F, out: Admissibility) -> list[str]:
 
 def _stability(model, q, u, fac, K):
     """(stable, negative pivots, smallest eigenvalue or None, its mode or None); see the module."""
-    from .equilibrium import Factorization, factorize, tangent_factorization
+    from .equilibrium import Factorization, designed_negatives, factorize, tangent_factorization
     from .linear import solver_of
 
-    saddle = [getattr(t, "negatives", None) for t in getattr(model, "terms", ())]
+    designed = designed_negatives(model)
     solver = solver_of(model)
-    held = bool(getattr(model, "n_lam", 0)) or None in saddle
+    held = designed is None
     if held:
         # prescribed quantities and contacts border K (a saddle point, whose pivots say nothing): judge the stiffness
         # with them held instead (:meth:`StaticModel.stability_matrix`)
@@ -210,7 +210,7 @@ def _stability(model, q, u, fac, K):
         fac = Factorization(factorize(K, reuse_ordering=False, solver=solver), q.copy())
     elif fac is None or _stale(fac.q, q):
         fac = tangent_factorization(model, q, u)
-    expected = 0 if held else sum(saddle)
+    expected = 0 if held else designed
     n_neg = fac.negative_pivots()
     if n_neg is None and expected:
         # Newton's LU swapped rows; the saddle point of an energy is quasi-definite where it is stable (its

@@ -19,7 +19,7 @@ from ..status import Status
 from .linear import SINGLE_PRECISION_PROBE, factorize, solver_of  # noqa: F401  (re-exported)
 
 __all__ = ["CONVERGED", "CONTINUATION_FAILED", "DIVERGED", "Equilibrium", "Factorization", "MAX_ITERATIONS",
-           "OUTSIDE_BOUNDS", "factorize", "inside_bounds", "newton_krylov", "solve_equilibrium",
+           "OUTSIDE_BOUNDS", "designed_negatives", "factorize", "inside_bounds", "newton_krylov", "solve_equilibrium",
            "tangent_factorization", "verify"]
 
 CONVERGED, MAX_ITERATIONS, DIVERGED, CONTINUATION_FAILED, OUTSIDE_BOUNDS = (
@@ -58,7 +58,17 @@ def tangent_factorization(model, q: np.ndarray, u: np.ndarray) -> Factorization:
 
 def _factorization(K, q, model=None) -> Factorization:
     return Factorization(factorize(K, single=True, pivot_threshold=getattr(model, "pivot_threshold", 0.01),
-                                   solver=solver_of(model)), q.copy())
+                                   solver=solver_of(model), negatives=designed_negatives(model)), q.copy())
+
+
+def designed_negatives(model) -> int | None:
+    """How many negative eigenvalues ``model``'s tangent has where it is stable, by design: those of a
+    symmetric saddle point's rows (the continuous pressure's); None where some rows do not keep it symmetric
+    (contact, prescribed quantities: the stability test then factorises the stiffness it holds)."""
+    saddle = [getattr(t, "negatives", None) for t in getattr(model, "terms", ())]
+    if getattr(model, "n_lam", 0) or None in saddle:
+        return None
+    return sum(saddle)
 
 
 @dataclass

@@ -13,7 +13,8 @@ superlu     SciPy's SuperLU (always installed): LU in symmetric mode, the minimu
             factorisation of a pattern reused, diagonal pivots where it can (then its pivots are the inertia)
 pardiso     Intel MKL PARDISO (``pip install casadi-ws[fast]``: pypardiso, which brings MKL; x86-64 only):
             METIS ordering and symbolic analysis once per pattern (up to 64 live factorisations share it),
-            numeric factorisations after, in double precision; a symmetric K gets a Bunch-Kaufman L D L^T
+            numeric factorisations after (Newton's in single precision where a symmetric K's pivots and a
+            probe solve allow, else in double); a symmetric K gets a Bunch-Kaufman L D L^T
             (half the work, its inertia exact unless a pivot was perturbed), an unsymmetric one an LU (no inertia: stability
             checks then compute eigenvalues, slowly). A numerically singular K is factorised with perturbed
             pivots instead of refused: Newton's residual test still decides
@@ -94,7 +95,7 @@ SINGLE_PRECISION_PROBE = 3e-2
 
 
 def factorize(K, single: bool = False, pivot_threshold: float = 0.01, reuse_ordering: bool = True,
-              solver: str = "superlu") -> object:
+              solver: str = "superlu", negatives: int | None = 0) -> object:
     """LU of K by ``solver`` (a name of :data:`LINEAR_SOLVERS` resolved by :func:`choose`); with ``single``,
     in single precision where that is accurate enough (Newton's choice).
 
@@ -109,12 +110,15 @@ def factorize(K, single: bool = False, pivot_threshold: float = 0.01, reuse_orde
     ``pivot_threshold``: SuperLU's diag_pivot_thresh (a row is swapped in when the diagonal is below this
     share of its column's largest entry); 0 keeps the diagonal pivots unless one is exactly zero, so that
     the LU is an L D L^T of a symmetric K and its pivots give K's inertia (the stability test's use).
+    ``negatives``: how many negative pivots K has where it is stable, by design (a saddle point's pressure
+    rows), or None if that is not known; PARDISO's single-precision L D L^T is kept only with that many.
     ``reuse_ordering`` False: a one-off matrix (the stability test's held stiffness, whose pattern follows
     the contact set), ordered for itself and not cached, so it does not evict the tangent's ordering.
     """
     K = K.tocsc() if not sp.isspmatrix_csc(K) else K
     if solver == "pardiso" or (solver == "auto" and not _MISSING):
-        lu = _pardiso_factorize(K, reuse_ordering, unsymmetric=solver == "pardiso")
+        lu = _pardiso_factorize(K, reuse_ordering, unsymmetric=solver == "pardiso",
+                                single=single and negatives is not None, negatives=negatives or 0)
         if lu is not None:
             return lu
     # K is structurally symmetric and nearly numerically symmetric: symmetric mode with a small pivot
@@ -252,12 +256,12 @@ class _Analysis:
     """One PARDISO handle: the ordering and symbolic analysis of a pattern in one mode (symmetric
     indefinite or unsymmetric), and up to ``slots`` numeric factorisations sharing it."""
 
-    def __init__(self, pattern: _Pattern, symmetric: bool, slots: int, threads: int):
-        self.n, self.slots = pattern.n, slots
+    def __init__(self, pattern: _Pattern, symmetric: bool, slots: int, threads: int, single: bool = False):
+        self.n, self.slots, self.single = pattern.n, slots, single
         self.mtype = -2 if symmetric else 11
         self.indptr, self.indices = ((pattern.u_indptr, pattern.u_indices) if symmetric
                                      else (pattern.f_indptr, pattern.f_indices))
-        self.dtype = np.float64
+        self.dtype = np.float32 if single else np.float64
         iparm = np.zeros(64, np.int32)
         iparm[0] = 1  # these settings, not the defaults
         iparm[1] = 2  # METIS ordering
@@ -265,6 +269,7 @@ class _Analysis:
         iparm[10] = iparm[12] = 0  # no scaling or matching: they would follow the analysed values
         iparm[11] = 0 if symmetric else 2  # the CSC arrays read as CSR are K^T: solve the transposed system
         iparm[20] = 1  # Bunch-Kaufman pivoting (symmetric indefinite)
+        iparm[27] = int(single)
         iparm[34] = 1  # 0-based indices
         # conditional numerical reproducibility: without it, with 2 threads, the same K gave factors differing
         # in the last bits from run to run, which chord-Newton amplified (27 iterations or 71 from rest on the
@@ -315,13 +320,13 @@ class _Analysis:
 
 
 class _PardisoLU:
-    """A numeric factorisation in one slot of an analysis (freed with this object)."""
+    """A numeric factorisation in one slot of an analysis (freed with this object); in single precision, K is
+    kept to refine against (as :class:`_PermutedLU` does)."""
 
-    single = False  # double precision always (see _pardiso_factorize)
-    K = None
-
-    def __init__(self, analysis: _Analysis, data):
+    def __init__(self, analysis: _Analysis, data, K=None):
         self.analysis, self.data = analysis, np.ascontiguousarray(data, dtype=analysis.dtype)
+        self.single = analysis.single
+        self.K = K if analysis.single else None
         self.slot = analysis.free.pop()
         try:
             analysis.call(self.slot, 22, self.data)
@@ -352,17 +357,40 @@ def _threads() -> int:
     return max(1, int(_LIB[1]()))
 
 
-def _analysis(pattern: _Pattern, symmetric: bool) -> _Analysis:
-    key = (symmetric, _threads())
+def _analysis(pattern: _Pattern, symmetric: bool, single: bool = False) -> _Analysis:
+    key = (symmetric, _threads(), single)
     a = pattern.analyses.get(key)
     if a is None or not a.free:
-        a = pattern.analyses[key] = _Analysis(pattern, symmetric, MAX_FACTORS, key[1])
+        a = pattern.analyses[key] = _Analysis(pattern, symmetric, MAX_FACTORS, key[1], single)
     return a
 
 
-def _pardiso_factorize(K, reuse_ordering: bool, unsymmetric: bool = True):
+def _single_ldlt(pattern: _Pattern, K, data, negatives: int = 0):
+    """The single-precision L D L^T of a symmetric K, or None where it cannot be trusted: more negative pivots
+    than ``negatives`` (those of a stable saddle point) or a perturbed pivot (the inertia the stability test
+    reads: where round-off could decide it, a double-precision factorisation settles it), or a probe solve off
+    by more than :data:`SINGLE_PRECISION_PROBE`.
+
+    Why the pivots are checked as well as the probe: on a nearly incompressible K (nu = 0.499, mean
+    dilatation) PARDISO's single precision passed the probe (error 0.019) with two spurious negative pivots,
+    and Newton stalled on it."""
+    try:
+        lu = _PardisoLU(_analysis(pattern, True, single=True), data, K)
+    except RuntimeError:
+        return None
+    if lu.negative_pivots() != negatives:
+        return None
+    x = lu.solve(K @ pattern.probe)
+    if not np.linalg.norm(x - pattern.probe) < SINGLE_PRECISION_PROBE * np.linalg.norm(pattern.probe):
+        return None
+    return lu
+
+
+def _pardiso_factorize(K, reuse_ordering: bool, unsymmetric: bool = True, single: bool = False,
+                       negatives: int = 0):
     """PARDISO's factorisation of K; None if K is unsymmetric and ``unsymmetric`` is False (``auto``: such a
-    K goes to SuperLU, whose diagonal pivots the stability test reads; PARDISO's LU has no inertia)."""
+    K goes to SuperLU, whose diagonal pivots the stability test reads; PARDISO's LU has no inertia). With
+    ``single``, a symmetric K's L D L^T in single precision where :func:`_single_ldlt` trusts it."""
     if not K.has_sorted_indices:
         K = K.sorted_indices()
     for pattern in _PATTERNS if reuse_ordering else ():
@@ -380,7 +408,8 @@ def _pardiso_factorize(K, reuse_ordering: bool, unsymmetric: bool = True):
     data = K.data[pattern.upper] if symmetric else K.data
     if not reuse_ordering:  # a one-off matrix: its own analysis, freed with its factorisation
         return _PardisoLU(_Analysis(pattern, symmetric, 1, _threads()), data)
-    # double precision always: PARDISO's single-precision L D L^T of a nearly incompressible (nu = 0.499) K
-    # passed the probe that SuperLU's failed (error 0.019), with two spurious negative pivots, and Newton
-    # stalled on it
+    if single and symmetric:
+        lu = _single_ldlt(pattern, K, data, negatives)
+        if lu is not None:
+            return lu
     return _PardisoLU(_analysis(pattern, symmetric), data)
