@@ -9,8 +9,10 @@ __all__ = ["TangentProducts", "bounded_step", "closest_to_box", "curvature", "in
            "second_order", "sensitivity"]
 
 
-def sensitivity(model, q, fac, K=None) -> tuple[np.ndarray, np.ndarray]:
-    """(A, S): A = C K^-1 H^T (3 x n_u), S = K^-1 H^T = dq/du on the free dofs (n_free x n_u).
+def sensitivity(model, q, fac, K=None, compliance: bool = False) -> tuple:
+    """(A, S): A = C K^-1 H^T (3 x n_u), S = K^-1 H^T = dq/du on the free dofs (n_free x n_u); with
+    ``compliance``, (A, S, G), G = C fac^-1 C^T the tip's compliance (:func:`casadi_ws.workspace.maps.point_maps`),
+    solved with S's first solve (the factors are read once for both; G is not refined).
 
     ``K``: the tangent at q, when ``fac`` was computed near q but not at it: iterative refinement then
     brings S to K's own (an LU one Newton iterate away leaves A ~1 % off; the predictors built on S need
@@ -19,17 +21,26 @@ def sensitivity(model, q, fac, K=None) -> tuple[np.ndarray, np.ndarray]:
     """
     H = model.actuation_matrix(q)  # (n_u, n_free), H = -dL/dq
     if not model.n_u:
-        return np.zeros((3, 0)), np.zeros((model.n_free, 0))
+        out = np.zeros((3, 0)), np.zeros((model.n_free, 0))
+        return (*out, _compliance(model, fac)) if compliance else out
     HT = np.ascontiguousarray(H.T)
     # one solve with n_u right-hand sides reads the factors once (they do not fit in cache)
-    S = fac.solve(HT)
+    if compliance:
+        X = fac.solve(np.hstack([HT, model.C_free.T.toarray()]))
+        S, G = X[:, :model.n_u], model.C_free @ X[:, model.n_u:]
+    else:
+        S = fac.solve(HT)
     K, steps = _refinement(fac, K)
     for _ in range(steps):
         S = S + fac.solve(HT - K @ S)
     S = _taut(model, q, fac, S)
     # (C order, as a checkpoint restores it: the products with S then round the same way after a resume)
     S = np.ascontiguousarray(S)
-    return model.C_free @ S, S
+    return (model.C_free @ S, S, G) if compliance else (model.C_free @ S, S)
+
+
+def _compliance(model, fac):
+    return model.C_free @ fac.solve(model.C_free.T.toarray())
 
 
 def _taut(model, q, fac, S):

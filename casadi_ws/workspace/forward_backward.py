@@ -146,15 +146,15 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings):
                 fac = tangent_factorization(model, res.q, res.u)
                 n_fac += 1
             violations = admissibility(model, res.q, res.u, fac).mask
-            A_new, S_new, Q_new = _derivatives(model, res.q, res.u, fac, scale, bsettings)
-            maps = point_maps(model, res.q, res.u, A_new, fac)
+            A_new, S_new, Q_new, G = _derivatives(model, res.q, res.u, fac, scale, bsettings)
+            maps = point_maps(model, res.q, res.u, A_new, fac, G)
         out.append((res.q, res.u, res.tip, res.status, res.ok, A_new, S_new, Q_new, res.equilibrium_solves,
                     n_fac, violations, maps))
     return out
 
 
 def _derivatives(model, q, u, fac, eta, bsettings):
-    """(A, S, Q) of a reached configuration from an LU near it; Q (and the refinement by the exact tangent
+    """(A, S, Q, the tip's compliance for its maps) of a reached configuration from an LU near it; Q (and the refinement by the exact tangent
     at q, when the LU was computed elsewhere: at the predictor, one iterate away) only for the reduced
     backward, whose predictor they feed (IPOPT's has none), Q only if it predicts to second order."""
     reduced = bsettings.formulation == "reduced"
@@ -164,8 +164,8 @@ def _derivatives(model, q, u, fac, eta, bsettings):
         K = TangentProducts(model, q, u)
     else:
         K = model.residual_and_tangent(q, u)[1]
-    A, S = sensitivity(model, q, fac, K)
-    return A, S, (curvature(model, q, u, S, fac, eta, K) if reduced and bsettings.second_order else None)
+    A, S, G = sensitivity(model, q, fac, K, compliance=True)
+    return A, S, (curvature(model, q, u, S, fac, eta, K) if reduced and bsettings.second_order else None), G
 
 
 def _by_differences(model, bsettings) -> bool:
@@ -496,9 +496,9 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
                                    f"({', '.join(start_check.violations)}); cannot start")
             grid = Grid(eq.tip, settings.step) if settings.strategy == "uniform" else None
             fac0 = tangent_factorization(model, eq.q, eq.u)
-            A0, S0, Q0 = _derivatives(model, eq.q, eq.u, fac0, settings.step, settings.backward)
+            A0, S0, Q0, G0 = _derivatives(model, eq.q, eq.u, fac0, settings.step, settings.backward)
             start = _Config(grid.index(eq.tip) if grid else (0, 0, 0), eq.tip, eq.q, eq.u.copy(), A0, S0, Q0,
-                            start_check.mask, point_maps(model, eq.q, eq.u, A0, fac0))
+                            start_check.mask, point_maps(model, eq.q, eq.u, A0, fac0, G0))
             ex = Exploration(problem, model, settings, run, start, grid)
             ex.counters["equilibrium_solves"] += 1
             ex.counters["factorizations"] += 1

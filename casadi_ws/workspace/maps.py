@@ -63,11 +63,12 @@ def direction(model, q) -> np.ndarray:
     return d / np.linalg.norm(d)
 
 
-def point_maps(model, q, u, A, fac) -> dict:
-    """The maps at one verified equilibrium (q, u) with its sensitivity A and an LU of its tangent."""
+def point_maps(model, q, u, A, fac, G=None) -> dict:
+    """The maps at one verified equilibrium (q, u) with its sensitivity A and an LU of its tangent (or the
+    tip's compliance G = C K^-1 C^T, 3 x 3, already solved with it: ``sensitivity(..., compliance=True)``)."""
     s = np.linalg.svd(A, compute_uv=False) if A is not None and A.size else np.zeros(1)
-    CT = model.C_free.T.toarray()
-    G = model.C_free @ fac.solve(CT)  # C K^-1 C^T, 3 x 3
+    if G is None:
+        G = model.C_free @ fac.solve(model.C_free.T.toarray())
     return {**state_maps(model, q, u), "steerability": float(s.min()),
             "compliance": float(np.linalg.eigvalsh(0.5 * (G + G.T)).max()), "compliance_matrix": G}
 
