@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..solvers.sensitivity import tip_compliance
+
 __all__ = ["MAPS", "effort", "point_maps"]
 
 MAPS = ("effort", "steerability", "compliance", "tilt", "contact")
@@ -68,7 +70,7 @@ def point_maps(model, q, u, A, fac, G=None) -> dict:
     tip's compliance G = C K^-1 C^T, 3 x 3, already solved with it: ``sensitivity(..., compliance=True)``)."""
     s = np.linalg.svd(A, compute_uv=False) if A is not None and A.size else np.zeros(1)
     if G is None:
-        G = model.C_free @ fac.solve(model.C_free.T.toarray())
+        G = tip_compliance(model, fac)
     return {**state_maps(model, q, u), "steerability": float(s.min()),
             "compliance": float(np.linalg.eigvalsh(0.5 * (G + G.T)).max()), "compliance_matrix": G}
 
