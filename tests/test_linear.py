@@ -124,20 +124,36 @@ def test_the_trunks_equilibrium_is_the_same_with_both_solvers():
     assert np.linalg.norm(tips["superlu"] - tips["pardiso"]) < 1e-9
 
 
-def test_auto_is_pardiso_for_a_symmetric_tangent_and_superlu_for_an_unsymmetric_one(monkeypatch):
-    """The 4-node corotational tangent is unsymmetric: ``auto`` keeps SuperLU there, whose pivots the
-    stability test reads; the 10-node one is symmetric, and gets PARDISO's L D L^T and its inertia."""
-    for order, backend in ((1, "_PermutedLU"), (2, "_PardisoLU")):
+def test_auto_for_symmetric_and_unsymmetric_tangents(monkeypatch):
+    """The 10-node corotational tangent is symmetric: PARDISO's L D L^T and its inertia. The 4-node one is
+    unsymmetric: Newton gets PARDISO's LU (no inertia; the stability test reads the symmetric part's), a
+    factorisation that asks for the inertia gets SuperLU's LU, whose pivots say it."""
+    for order in (1, 2):
         pb = small_trunk()
         if order == 2:
             from casadi_ws.fem.mesh import quadratic
             pb.mesh = quadratic(pb.mesh)
         m = cw.StaticModel(pb)
         eq = cw.solve_equilibrium(m, np.array([60.0, 30.0]))
-        assert linear.solver_of(m) == "auto" and type(eq.factorization.lu).__name__ == backend
-        assert eq.factorization.negative_pivots() == 0
+        assert linear.solver_of(m) == "auto" and type(eq.factorization.lu).__name__ == "_PardisoLU"
+        assert eq.factorization.negative_pivots() == (None if order == 1 else 0)
+        K = m.residual_and_tangent(eq.q, eq.u)[1]
+        assert type(factorize(K, solver="auto")).__name__ == ("_PermutedLU" if order == 1 else "_PardisoLU")
+        assert factorize(K, solver="auto").negative_pivots() == 0
+        adm = admissibility(m, eq.q, eq.u, eq.factorization)
+        assert adm.stable and adm.negative_pivots == 0 and adm.smallest_eigenvalue is None  # no eigenvalues needed
     monkeypatch.setattr(linear, "available", lambda name: name != "pardiso")
     assert linear.choose("auto") == "superlu"
+
+
+@pytest.mark.parametrize("shift, expected", [(-2.0, True), (3.0, False)])
+def test_the_symmetric_part_test_against_dense_eigenvalues(shift, expected):
+    A = _symmetric(shift=shift)
+    A = (A + sp.triu(A, 1).multiply(0.1)).tocsc()  # unsymmetric values, symmetric pattern
+    A.sort_indices()
+    S = 0.5 * (A + A.T).toarray()
+    assert (np.linalg.eigvalsh(S)[0] > 0) == expected
+    assert linear.symmetric_part_positive_definite(A) == expected
 
 
 def test_the_problem_files_solver_linear(tmp_path, monkeypatch):

@@ -198,7 +198,7 @@ def _state_limits(model, q, F, out: Admissibility) -> list[str]:
 def _stability(model, q, u, fac, K):
     """(stable, negative pivots, smallest eigenvalue or None, its mode or None); see the module."""
     from .equilibrium import Factorization, designed_negatives, factorize, tangent_factorization
-    from .linear import solver_of
+    from .linear import solver_of, symmetric_part_positive_definite
 
     designed = designed_negatives(model)
     solver = solver_of(model)
@@ -212,6 +212,12 @@ def _stability(model, q, u, fac, K):
         fac = tangent_factorization(model, q, u)
     expected = 0 if held else designed
     n_neg = fac.negative_pivots()
+    if n_neg is None and not held and not expected:
+        # Newton's LU of an unsymmetric K (PARDISO's) has no inertia: a positive definite symmetric part
+        # proves every eigenvalue's real part positive
+        Ks = fac.K if fac.K is not None else (K if K is not None else model.residual_and_tangent(q, u)[1])
+        if symmetric_part_positive_definite(Ks):
+            return True, 0, None, None
     if n_neg is None and expected:
         # Newton's LU swapped rows; the saddle point of an energy is quasi-definite where it is stable (its
         # stiffness block positive definite, the pressure block negative), and such a matrix has an L D L^T

@@ -37,9 +37,9 @@ class Factorization:
         return self.lu.solve(b)
 
     def negative_pivots(self) -> int | None:
-        """How many pivots of the LU are negative, or None if SuperLU swapped rows (the count then says
-        nothing). Without row swaps the LU of a symmetric K is its L D L^T, so this is the number of K's
-        negative eigenvalues (Sylvester's law of inertia), at the price of reading U's diagonal."""
+        """How many pivots of the LU are negative, or None if the count says nothing (SuperLU swapped rows, or
+        PARDISO's LU of an unsymmetric K). Without row swaps the LU of a symmetric K is its L D L^T, so this
+        is the number of K's negative eigenvalues (Sylvester's law of inertia)."""
         f = getattr(self.lu, "negative_pivots", None)
         return f() if f is not None else None
 
@@ -58,7 +58,8 @@ def tangent_factorization(model, q: np.ndarray, u: np.ndarray) -> Factorization:
 
 def _factorization(K, q, model=None) -> Factorization:
     return Factorization(factorize(K, single=True, pivot_threshold=getattr(model, "pivot_threshold", 0.01),
-                                   solver=solver_of(model), negatives=designed_negatives(model)), q.copy())
+                                   solver=solver_of(model), negatives=designed_negatives(model), inertia=False),
+                         q.copy())
 
 
 def designed_negatives(model) -> int | None:
