@@ -196,3 +196,24 @@ def test_a_workers_history_does_not_change_a_factorisation():
         factorize(first.tocsc(), solver="pardiso")
         out.append(factorize(A, solver="pardiso").solve(b))
     np.testing.assert_array_equal(out[0], out[1])
+
+
+def test_the_methods_run_pardiso_on_one_thread_though_mkl_is_loaded_inside_them():
+    """threadpoolctl's limit reaches only the libraries loaded before it; MKL loads on first use, inside
+    a method: :func:`casadi_ws.solvers.linear.one_mkl_thread` limits it then, and restores it after."""
+    code = ("import os, scipy.sparse as sp\n"
+            "os.environ.pop('MKL_NUM_THREADS', None); os.environ.pop('OMP_NUM_THREADS', None)\n"
+            "from casadi_ws.solvers import linear\n"
+            "from casadi_ws.runtime.executor import one_blas_thread\n"
+            "A = (sp.random(60, 60, density=0.1, random_state=1) + 10 * sp.eye(60)).tocsc(); A = (A + A.T).tocsc()\n"
+            "with one_blas_thread():\n"
+            "    with one_blas_thread():\n"
+            "        linear.factorize(A, solver='pardiso')\n"
+            "        inside = linear._threads()\n"
+            "    nested = linear._threads()\n"
+            "print(inside, nested, linear._threads())\n")
+    env = {k: v for k, v in __import__("os").environ.items() if k not in ("MKL_NUM_THREADS", "OMP_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    default = subprocess.run([sys.executable, "-c", "from casadi_ws.solvers import linear; print(linear._threads())"],
+                             capture_output=True, text=True, env=env, timeout=120)
+    assert out.stdout.split() == ["1", "1", default.stdout.strip()], out.stderr[-2000:]

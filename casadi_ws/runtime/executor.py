@@ -40,10 +40,12 @@ __all__ = ["DaskExecutor", "Executor", "ProcessExecutor", "SerialExecutor", "Sch
 
 @contextlib.contextmanager
 def one_blas_thread():
-    """Run the enclosed code with a single BLAS thread (restored afterwards)."""
+    """Run the enclosed code with a single BLAS thread, and MKL's PARDISO on one (restored afterwards)."""
     from threadpoolctl import threadpool_limits
 
-    with threadpool_limits(limits=1, user_api="blas"):
+    from ..solvers.linear import one_mkl_thread
+
+    with threadpool_limits(limits=1, user_api="blas"), one_mkl_thread():
         yield
 
 
@@ -73,17 +75,13 @@ def _call(fn, key, blob, job):
 
 
 def _plain_one_thread(fn, args):
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         return fn(*args)
 
 
 def _call_one_thread(fn, key, blob, job):
     # a Dask worker process is not ours to configure at start: limit BLAS around each job
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         return fn(model_for(blob, key), *job)
 
 

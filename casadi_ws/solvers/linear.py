@@ -27,6 +27,7 @@ auto        where PARDISO is installed: PARDISO for a symmetric K (10-node corot
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import weakref
 
@@ -34,8 +35,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-__all__ = ["LINEAR_SOLVERS", "SINGLE_PRECISION_PROBE", "available", "choose", "factorize", "solver_of",
-           "symmetric_part_positive_definite"]
+__all__ = ["LINEAR_SOLVERS", "SINGLE_PRECISION_PROBE", "available", "choose", "factorize", "one_mkl_thread",
+           "solver_of", "symmetric_part_positive_definite"]
 
 LINEAR_SOLVERS = ("auto", "superlu", "pardiso")
 """The names ``solver.linear`` accepts."""
@@ -214,8 +215,34 @@ def _mkl():
                       i32, i32, ctypes.c_void_p, ctypes.c_void_p, i32]
         f.restype = None
         lib.MKL_Get_Max_Threads.restype = ctypes.c_int
-        _LIB.extend([f, lib.MKL_Get_Max_Threads])
+        lib.MKL_Set_Num_Threads_Local.restype = ctypes.c_int
+        lib.MKL_Set_Num_Threads_Local.argtypes = [ctypes.c_int]
+        _LIB.extend([f, lib.MKL_Get_Max_Threads, lib.MKL_Set_Num_Threads_Local])
+        if _ONE_THREAD:  # loaded inside one_mkl_thread: the outermost scope restores MKL's own setting
+            _ONE_THREAD[0] = _LIB[2](1)
     return _LIB[0]
+
+
+_ONE_THREAD: list = []
+"""The MKL thread settings that :func:`one_mkl_thread` scopes restore, innermost last (None: nothing)."""
+
+
+@contextlib.contextmanager
+def one_mkl_thread():
+    """MKL's PARDISO on one thread (of this thread) in the enclosed code.
+
+    Why not threadpoolctl's limit alone (:func:`casadi_ws.runtime.executor.one_blas_thread`): it reaches the
+    libraries loaded when it is entered, and MKL is loaded on first use, mostly inside. MKL then ran on every
+    core in a one-worker run: a solve with 2-10 right-hand sides took 1.3-1.8 ms against 0.6-1.7 ms on one
+    thread (the 4-cable trunk's K, waking the other thread), and its factors differed in their last bits
+    from those of a pool's workers (one thread each), so a one-worker run was not the same as a pool's."""
+    _ONE_THREAD.append(_LIB[2](1) if _LIB else None)
+    try:
+        yield
+    finally:
+        previous = _ONE_THREAD.pop()
+        if previous is not None and _LIB:
+            _LIB[2](previous)
 
 
 class _Pattern:
@@ -357,8 +384,9 @@ _PATTERNS: list[_Pattern] = []
 
 
 def _threads() -> int:
-    """MKL's threads now: 1 in the methods' processes (:func:`casadi_ws.runtime.executor.one_blas_thread`,
-    workers), the cores otherwise. Results are bit-reproducible for a given count."""
+    """MKL's threads now: 1 in the methods (:func:`one_mkl_thread`, in
+    :func:`casadi_ws.runtime.executor.one_blas_thread`, and their workers), the cores otherwise. Results are
+    bit-reproducible for a given count."""
     _mkl()
     return max(1, int(_LIB[1]()))
 
