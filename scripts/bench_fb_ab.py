@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 # run in a subprocess, with the tree to measure first on sys.path (worker processes inherit it)
 RUNNER = r"""
-import json, sys, time
+import json, resource, sys, time
 tree, problem = sys.argv[1], sys.argv[2]
 sys.path.insert(0, tree)
 import casadi_ws as cw
@@ -39,7 +39,10 @@ t = time.perf_counter()
 r = forward_backward(pb, FBSettings(workers=2, progress=False))
 c = r.counters
 b = getattr(r, "boundary", None)
+# the largest resident set of this process or of a worker (the pool's have ended), as benchlib.peak_mb
+peak = max(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
 print(json.dumps({"time": time.perf_counter() - t, "cells": c["feasible"], "lu": c["factorizations"],
+                  "peak_mb": peak / 1024,
                   "excluded": c.get("excluded"), "boundary_s": r.timings.get("boundary"),
                   "volume": None if b is None or b.volume is None else abs(b.volume)}))
 """
@@ -95,7 +98,9 @@ def main():
         b = rs[0].get("boundary_s")
         surface = "" if b is None else (f", of which boundary {sum(r['boundary_s'] for r in rs) / len(rs):.1f} s"
                                         + (f" (volume {rs[0]['volume'] * 1e6:.2f} cm³)" if rs[0]["volume"] else ""))
-        return f"{t:.1f} s, {rs[0]['cells']} cells, {rs[0]['lu'] / rs[0]['cells']:.2f} LU / cell{removed}{surface}"
+        peak = "" if "peak_mb" not in rs[0] else f", peak {max(r['peak_mb'] for r in rs):.0f} MB"
+        return (f"{t:.1f} s, {rs[0]['cells']} cells, {rs[0]['lu'] / rs[0]['cells']:.2f} LU / cell{removed}{surface}"
+                f"{peak}")
 
     lines = [
         f"## Forward-backward, this code against `{base_rev}` (issue: {args.issue}) — "
@@ -103,7 +108,7 @@ def main():
         "",
         f"Machine: {machine()}. Problems in `problems/`, each at its default grid step, 2 worker processes, "
         f"default settings. Runs interleaved (base, this code) per problem, {args.repeats} of each; times are "
-        f"means. This code: `{head_rev}`.",
+        f"means; peak: the largest resident set of the run's process or a worker. This code: `{head_rev}`.",
         "",
         f"| problem | `{base_rev}` | this code | time ratio |",
         "|---|---|---|---|",
