@@ -154,9 +154,10 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings):
 
 
 def _derivatives(model, q, u, fac, eta, bsettings):
-    """(A, S, Q, the tip's compliance for its maps) of a reached configuration from an LU near it; Q (and the refinement by the exact tangent
-    at q, when the LU was computed elsewhere: at the predictor, one iterate away) only for the reduced
-    backward, whose predictor they feed (IPOPT's has none), Q only if it predicts to second order."""
+    """(A, S, Q, G) of a reached configuration from an LU near it, G the tip's compliance for its maps; Q (and
+    the refinement by the exact tangent at q, when the LU was computed elsewhere: at the predictor, one iterate
+    away) only for the reduced backward, whose predictor they feed (IPOPT's has none), Q only if it predicts
+    to second order."""
     reduced = bsettings.formulation == "reduced"
     if np.array_equal(fac.q, q) or not reduced:
         K = None
