@@ -66,6 +66,42 @@ def test_pardisos_single_precision_is_kept_only_without_a_negative_pivot():
     assert lu.negative_pivots() == int(np.count_nonzero(np.linalg.eigvalsh(A.toarray()) < 0))
 
 
+def _grid_laplacian(n):
+    """The 7-point Laplacian of an n^3 grid plus the identity: a 3-D mesh's pattern, where nested dissection
+    makes smaller factors than minimum degree once the grid is large."""
+    d = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(n, n))
+    i = sp.eye(n)
+    A = (sp.kron(sp.kron(d, i), i) + sp.kron(sp.kron(i, d), i) + sp.kron(sp.kron(i, i), d) + sp.eye(n**3)).tocsc()
+    A.sort_indices()
+    return A
+
+
+@pytest.mark.parametrize("make", [lambda: _symmetric(), lambda: _grid_laplacian(14)], ids=["random", "grid"])
+def test_the_ordering_with_the_smaller_factors_is_chosen(make):
+    A = make()
+    lu = factorize(A, single=True, solver="pardiso")
+    a = lu.analysis
+    assert set(a.factor_sizes) == {"metis", "amd"}
+    assert a.factor_sizes[a.ordering] == min(a.factor_sizes.values())
+    b = np.random.default_rng(0).standard_normal(A.shape[0])
+    ref = np.linalg.solve(A.toarray(), b)
+    assert np.linalg.norm(lu.solve(b) - ref) < 1e-4 * np.linalg.norm(ref)
+    again = linear._Analysis(linear._Pattern(A), True, 1, linear._threads(), True, True)
+    assert again.ordering == a.ordering and again.factor_sizes == a.factor_sizes  # every process picks the same
+
+
+def test_single_precision_uses_diagonal_pivots_only_where_no_negative_pivot_is_designed():
+    """Diagonal pivots (0.6 of Bunch-Kaufman's time) for a K that should be positive definite; a saddle point's
+    designed negative pivots, and the double-precision fallback, keep Bunch-Kaufman's."""
+    B = _symmetric(shift=-2.0)
+    assert factorize(B, single=True, solver="pardiso").analysis.iparm[20] == 0
+    saddle = _symmetric(shift=3.0)
+    expected = int(np.count_nonzero(np.linalg.eigvalsh(saddle.toarray()) < 0))
+    lu = factorize(saddle, single=True, solver="pardiso", negatives=expected)
+    assert lu.analysis.iparm[20] == 1 and lu.negative_pivots() == expected
+    assert factorize(B, single=False, solver="pardiso").analysis.iparm[20] == 1
+
+
 def test_an_unsymmetric_matrix_gets_an_lu_and_no_inertia():
     A = _symmetric()
     A = (A + sp.triu(A, 1).multiply(0.3)).tocsc()  # same pattern, unsymmetric values
