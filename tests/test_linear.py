@@ -90,16 +90,20 @@ def test_the_ordering_with_the_smaller_factors_is_chosen(make):
     assert again.ordering == a.ordering and again.factor_sizes == a.factor_sizes  # every process picks the same
 
 
-def test_single_precision_uses_diagonal_pivots_only_where_no_negative_pivot_is_designed():
-    """Diagonal pivots (0.6 of Bunch-Kaufman's time) for a K that should be positive definite; a saddle point's
-    designed negative pivots, and the double-precision fallback, keep Bunch-Kaufman's."""
+def test_single_precision_is_cholesky_only_where_no_negative_pivot_is_designed():
+    """Cholesky (half the time of Bunch-Kaufman's L D L^T) for a K that should be positive definite; a saddle
+    point's designed negative pivots, and the double-precision fallback, keep Bunch-Kaufman's, and an
+    indefinite K that Cholesky refuses is counted by it."""
     B = _symmetric(shift=-2.0)
-    assert factorize(B, single=True, solver="pardiso").analysis.iparm[20] == 0
+    lu = factorize(B, single=True, solver="pardiso")
+    assert lu.single and lu.analysis.mtype == 2 and lu.negative_pivots() == 0
     saddle = _symmetric(shift=3.0)
     expected = int(np.count_nonzero(np.linalg.eigvalsh(saddle.toarray()) < 0))
     lu = factorize(saddle, single=True, solver="pardiso", negatives=expected)
-    assert lu.analysis.iparm[20] == 1 and lu.negative_pivots() == expected
-    assert factorize(B, single=False, solver="pardiso").analysis.iparm[20] == 1
+    assert lu.analysis.mtype == -2 and lu.negative_pivots() == expected
+    lu = factorize(saddle, single=True, solver="pardiso")
+    assert not lu.single and lu.analysis.mtype == -2 and lu.negative_pivots() == expected
+    assert factorize(B, single=False, solver="pardiso").analysis.mtype == -2
 
 
 def test_an_unsymmetric_matrix_gets_an_lu_and_no_inertia():

@@ -289,19 +289,19 @@ class _Analysis:
     """One PARDISO handle: the ordering and symbolic analysis of a pattern in one mode (symmetric
     indefinite or unsymmetric), and up to ``slots`` numeric factorisations sharing it.
 
-    ``diagonal``: a symmetric K is factorised with diagonal pivots only (perturbed where one is tiny), not
-    Bunch and Kaufman's 1x1 and 2x2 ones. Why: the same factors cost ~0.55 of the time (measured in single
-    precision: 5.1 -> 3.2 ms at 2646 dofs, 13.8 -> 8.1 ms at 4374, as fast as a Cholesky factorisation),
-    and where K is positive definite, which is where no negative pivot is designed and the point is stable,
-    diagonal pivots are all it needs. Elsewhere a tiny pivot is perturbed, which the callers see
-    (:attr:`_PardisoLU.perturbed`): a single-precision factorisation is then refused and redone in double
-    precision, whose analysis keeps Bunch and Kaufman's pivots.
+    ``cholesky``: a symmetric K is factorised as positive definite (PARDISO's Cholesky, L L^T), not as
+    indefinite with Bunch and Kaufman's 1x1 and 2x2 pivots. Why: the same factors in about half the time
+    (measured in single precision, one thread: K_s 5.1 -> 2.2 ms at 2646 dofs, 13.8 -> 6.8 ms at 4374 dofs,
+    119 -> 64 ms at 18252, the solves no slower), and a K that is stable with no negative pivot by design is
+    positive definite. Where it is not, PARDISO stops at the first pivot that is not positive (its error -4,
+    raised as singular): a single-precision factorisation is then refused and redone in double precision,
+    whose analysis keeps Bunch and Kaufman's pivots and counts the negative ones.
     """
 
     def __init__(self, pattern: _Pattern, symmetric: bool, slots: int, threads: int, single: bool = False,
-                 diagonal: bool = False):
+                 cholesky: bool = False):
         self.n, self.slots, self.single = pattern.n, slots, single
-        self.mtype = -2 if symmetric else 11
+        self.mtype = (2 if cholesky else -2) if symmetric else 11
         self.indptr, self.indices = ((pattern.u_indptr, pattern.u_indices) if symmetric
                                      else (pattern.f_indptr, pattern.f_indices))
         self.dtype = np.float32 if single else np.float64
@@ -310,7 +310,7 @@ class _Analysis:
         iparm[9] = 8 if symmetric else 13  # pivot perturbation 1e-8 / 1e-13 (PARDISO's defaults per type)
         iparm[10] = iparm[12] = 0  # no scaling or matching: they would follow the analysed values
         iparm[11] = 0 if symmetric else 2  # the CSC arrays read as CSR are K^T: solve the transposed system
-        iparm[20] = 0 if diagonal else 1  # diagonal pivots, or Bunch-Kaufman's (symmetric indefinite)
+        iparm[20] = 1  # Bunch-Kaufman pivoting (symmetric indefinite)
         iparm[27] = int(single)
         iparm[34] = 1  # 0-based indices
         # conditional numerical reproducibility: without it, with 2 threads, the same K gave factors differing
@@ -408,9 +408,10 @@ class _PardisoLU:
             analysis.free.append(self.slot)
             self.slot = None
             raise
-        self.perturbed, self._negative = int(analysis.iparm[13]), int(analysis.iparm[22])
+        # (a Cholesky factorisation that succeeds had only positive pivots)
+        self.perturbed, self._negative = int(analysis.iparm[13]), 0 if analysis.mtype == 2 else int(analysis.iparm[22])
         # with perturbed pivots the factors are of a nearby matrix, and their inertia may not be K's
-        self.inertia_known = analysis.mtype == -2 and self.perturbed == 0
+        self.inertia_known = analysis.mtype in (-2, 2) and self.perturbed == 0
         weakref.finalize(self, analysis.release, self.slot)
 
     def negative_pivots(self) -> int | None:
@@ -432,8 +433,8 @@ def _threads() -> int:
     return max(1, int(_LIB[1]()))
 
 
-def _analysis(pattern: _Pattern, symmetric: bool, single: bool = False, diagonal: bool = False) -> _Analysis:
-    key = (symmetric, _threads(), single, symmetric and diagonal)
+def _analysis(pattern: _Pattern, symmetric: bool, single: bool = False, cholesky: bool = False) -> _Analysis:
+    key = (symmetric, _threads(), single, symmetric and cholesky)
     a = pattern.analyses.get(key)
     if a is None or not a.free:
         a = pattern.analyses[key] = _Analysis(pattern, symmetric, MAX_FACTORS, key[1], single, key[3])
@@ -450,7 +451,7 @@ def _single(pattern: _Pattern, K, data, symmetric: bool, negatives: int = 0):
     dilatation) PARDISO's single precision passed the probe (error 0.019) with two spurious negative pivots,
     and Newton stalled on it."""
     try:
-        lu = _PardisoLU(_analysis(pattern, symmetric, single=True, diagonal=negatives == 0), data, K)
+        lu = _PardisoLU(_analysis(pattern, symmetric, single=True, cholesky=negatives == 0), data, K)
     except RuntimeError:
         return None
     if lu.perturbed or (symmetric and lu.negative_pivots() != negatives):
@@ -462,13 +463,13 @@ def _single(pattern: _Pattern, K, data, symmetric: bool, negatives: int = 0):
 
 
 def symmetric_part_positive_definite(K) -> bool | None:
-    """Whether K's symmetric part (K + K^T) / 2 is positive definite, by PARDISO's L D L^T (single precision,
-    or double where that shows a negative or perturbed pivot); None where PARDISO is not installed, K's
-    pattern is not symmetric, or a pivot of the double-precision one is perturbed.
+    """Whether K's symmetric part (K + K^T) / 2 is positive definite, by PARDISO's Cholesky in single precision,
+    or its L D L^T in double where that fails; None where PARDISO is not installed, K's pattern is not
+    symmetric, or a pivot of the double-precision one is perturbed or zero.
 
     Why: where it is, every eigenvalue of K has a positive real part (Re lambda = v* K_s v / |v|^2 for
     K v = lambda v), so an unsymmetric K (the 4-node corotational tangent) whose Newton LU has no inertia is
-    stable. 2.6 ms at 2646 dofs with diagonal pivots in single precision (5.1 ms with Bunch and Kaufman's,
+    stable. 2.2 ms at 2646 dofs by Cholesky in single precision (5.1 ms with Bunch and Kaufman's pivots,
     8-9 ms for SuperLU's LU, whose pivots were read before); where it is not positive definite the stability
     test computes K's eigenvalues nearest zero.
     """
@@ -482,7 +483,11 @@ def symmetric_part_positive_definite(K) -> bool | None:
         return None
     data = (0.5 * (K.data + K.data[pattern.transpose]))[pattern.upper]
     for single in (True, False):
-        n = _PardisoLU(_analysis(pattern, True, single, diagonal=single), data).negative_pivots()
+        try:
+            n = _PardisoLU(_analysis(pattern, True, single, cholesky=single), data).negative_pivots()
+        except RuntimeError:  # a pivot of Cholesky's not positive, or a zero one: not known to be definite
+            n = None
+            continue
         if n == 0:
             return True
     return None if n is None else False
