@@ -291,11 +291,11 @@ class _Analysis:
 
     ``cholesky``: a symmetric K is factorised as positive definite (PARDISO's Cholesky, L L^T), not as
     indefinite with Bunch and Kaufman's 1x1 and 2x2 pivots. Why: the same factors in about half the time
-    (measured in single precision, one thread: K_s 5.1 -> 2.2 ms at 2646 dofs, 13.8 -> 6.8 ms at 4374 dofs,
-    119 -> 64 ms at 18252, the solves no slower), and a K that is stable with no negative pivot by design is
-    positive definite. Where it is not, PARDISO stops at the first pivot that is not positive (its error -4,
-    raised as singular): a single-precision factorisation is then refused and redone in double precision,
-    whose analysis keeps Bunch and Kaufman's pivots and counts the negative ones.
+    (measured in single precision, one thread, the same ordering: K_s 4.3 -> 2.2 ms at 2646 dofs, 12.5 -> 6.8 ms
+    at 4374 dofs, 119 -> 64 ms at 18252, the solves no slower), and a K that is stable with no negative pivot by
+    design is positive definite. Where it is not, PARDISO stops at the first pivot that is not positive (its
+    error -4, raised as singular): a single-precision factorisation is then refused and redone in double
+    precision, whose analysis keeps Bunch and Kaufman's pivots and counts the negative ones.
     """
 
     def __init__(self, pattern: _Pattern, symmetric: bool, slots: int, threads: int, single: bool = False,
@@ -469,7 +469,7 @@ def symmetric_part_positive_definite(K) -> bool | None:
 
     Why: where it is, every eigenvalue of K has a positive real part (Re lambda = v* K_s v / |v|^2 for
     K v = lambda v), so an unsymmetric K (the 4-node corotational tangent) whose Newton LU has no inertia is
-    stable. 2.2 ms at 2646 dofs by Cholesky in single precision (5.1 ms with Bunch and Kaufman's pivots,
+    stable. 2.2 ms at 2646 dofs by Cholesky in single precision (4.3 ms with Bunch and Kaufman's pivots,
     8-9 ms for SuperLU's LU, whose pivots were read before); where it is not positive definite the stability
     test computes K's eigenvalues nearest zero.
     """
