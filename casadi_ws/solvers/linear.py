@@ -12,10 +12,11 @@ name        backend
 superlu     SciPy's SuperLU (always installed): LU in symmetric mode, the minimum-degree ordering of the first
             factorisation of a pattern reused, diagonal pivots where it can (then its pivots are the inertia)
 pardiso     Intel MKL PARDISO (``pip install casadi-ws[fast]``: pypardiso, which brings MKL; x86-64 only):
-            METIS ordering and symbolic analysis once per pattern (up to 64 live factorisations share it),
-            numeric factorisations after (Newton's in single precision where a symmetric K's pivots and a
-            probe solve allow, else in double); a symmetric K gets a Bunch-Kaufman L D L^T
-            (half the work, its inertia exact unless a pivot was perturbed), an unsymmetric one an LU (no
+            ordering (METIS or AMD, the smaller factors) and symbolic analysis once per pattern (up to 64
+            live factorisations share it), numeric factorisations after (Newton's in single precision where a
+            symmetric K's pivots and a probe solve allow, else in double); a symmetric K gets a Bunch-Kaufman
+            L D L^T, or Cholesky in single precision where it should be positive definite (half the work of an
+            LU, its inertia exact unless a pivot was perturbed), an unsymmetric one an LU (no
             inertia: the stability test reads the symmetric part's, else eigenvalues). A numerically singular K
             is factorised with perturbed pivots instead of refused: Newton's residual test still decides
 auto        where PARDISO is installed: PARDISO for a symmetric K (10-node corotational and every hyperelastic
