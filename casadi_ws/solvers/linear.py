@@ -300,7 +300,7 @@ class _Analysis:
     """
 
     def __init__(self, pattern: _Pattern, symmetric: bool, slots: int, threads: int, single: bool = False,
-                 cholesky: bool = False):
+                 cholesky: bool = False, orderings: tuple = (2, 0)):
         self.n, self.slots, self.single = pattern.n, slots, single
         self.mtype = (2 if cholesky else -2) if symmetric else 11
         self.indptr, self.indices = ((pattern.u_indptr, pattern.u_indices) if symmetric
@@ -326,9 +326,9 @@ class _Analysis:
         # not depend on which factorisation of the pattern came first in this process (a worker's history)
         canonical = np.ascontiguousarray(pattern.canonical[pattern.upper] if symmetric else pattern.canonical,
                                          dtype=self.dtype)
-        self.pt = self._ordered(canonical)
+        self.pt = self._ordered(canonical, orderings)
 
-    def _ordered(self, canonical) -> np.ndarray:
+    def _ordered(self, canonical, orderings) -> np.ndarray:
         """The handle of the analysis whose factors have fewer nonzeros, of METIS's nested dissection and
         AMD's minimum degree (PARDISO's count; the other analysis is released).
 
@@ -338,7 +338,7 @@ class _Analysis:
         The factors' size decides and the analysis is deterministic: every process picks the same one."""
         best = None
         self.factor_sizes = {}
-        for ordering in (2, 0):  # METIS, AMD
+        for ordering in orderings:  # 2: METIS, 0: AMD
             self.pt = np.zeros(64, np.int64)
             self.iparm[1], self.iparm[17] = ordering, -1
             self.call(1, 11, canonical)
@@ -520,7 +520,8 @@ def _pardiso_factorize(K, reuse_ordering: bool, unsymmetric: bool = True, single
         return None
     data = K.data[pattern.upper] if symmetric else K.data
     if not reuse_ordering:  # a one-off matrix: its own analysis, freed with its factorisation
-        return _PardisoLU(_Analysis(pattern, symmetric, 1, _threads()), data)
+        # (METIS alone: a second analysis would double the cost of a matrix factorised once)
+        return _PardisoLU(_Analysis(pattern, symmetric, 1, _threads(), orderings=(2,)), data)
     if single:
         lu = _single(pattern, K, data, symmetric, negatives)
         if lu is not None:
