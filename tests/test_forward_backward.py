@@ -282,6 +282,58 @@ def test_the_linear_predictor_reaches_the_same_cells_with_more_lus():
     assert first.counters["factorizations_per_cell"] > 1.3 * second.counters["factorizations_per_cell"]
 
 
+def test_a_curvature_serves_later_generations_for_the_same_cells(monkeypatch):
+    """``curvature_age``: a reached configuration takes the Q of the one it was reached from while that Q is
+    young enough; fewer Q are computed, the workspace is the same."""
+    import importlib
+
+    fbm = importlib.import_module("casadi_ws.workspace.forward_backward")
+    calls = []
+    monkeypatch.setattr(fbm, "curvature", lambda *a, **k: calls.append(1) or curvature(*a, **k))
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    runs, computed = {}, {}
+    for age in (0, 2):
+        calls.clear()
+        runs[age] = forward_backward(pb, FBSettings(step=0.005, progress=False,
+                                                    backward=BackwardSettings(curvature_age=age)), model=m)
+        computed[age] = len(calls)
+    a, b = ({tuple(c) for c in r.arrays["cells"]} for r in runs.values())
+    assert len(a ^ b) <= 0.02 * len(a)
+    assert computed[0] >= runs[0].counters["feasible"]  # every verified answer, and the start
+    assert computed[2] < 0.6 * computed[0]
+    assert runs[2].counters["factorizations_per_cell"] < 1.3 * runs[0].counters["factorizations_per_cell"]
+    with pytest.raises(ValueError, match="curvature_age"):
+        forward_backward(pb, FBSettings(step=0.005, progress=False, backward=BackwardSettings(curvature_age=-1)),
+                         model=m)
+    # auto: passed on where a Q's residuals, n_u(n_u + 1), cost at least an assembled tangent
+    from types import SimpleNamespace
+
+    from casadi_ws.fem.elements import TET4, TET10
+    auto = BackwardSettings()
+    assert [fbm._curvature_age(SimpleNamespace(n_u=n, element=TET4), auto) for n in (2, 3, 4)] == [0, 2, 2]
+    assert [fbm._curvature_age(SimpleNamespace(n_u=n, element=TET10), auto) for n in (2, 3, 4)] == [0, 0, 2]
+
+
+def test_a_run_whose_curvatures_serve_later_generations_resumes_to_the_same_result(tmp_path):
+    # the frontier's Q ages are checkpointed: a resumed run passes on the same Q's as an uninterrupted one
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+
+    def run(max_cells=10**6, checkpoint_dir=None, resume=False):
+        return forward_backward(pb, FBSettings(step=0.005, progress=False, max_cells=max_cells,
+                                               backward=BackwardSettings(curvature_age=2)), model=m,
+                                checkpoint_dir=checkpoint_dir, resume=resume)
+
+    ref = run()
+    assert run(15, tmp_path).counters["stopped_at_max_cells"]  # after iteration 2, where the Q's are 2 old
+    resumed = run(checkpoint_dir=tmp_path, resume=True)
+    for k in ("explored", "feasible", "backward_solves", "factorizations"):
+        assert resumed.counters[k] == ref.counters[k], k
+    np.testing.assert_array_equal(resumed.arrays["cells"], ref.arrays["cells"])
+    np.testing.assert_array_equal(resumed.points, ref.points)  # to the bit: the same predictors
+
+
 def test_unreachable_target_is_not_reached():
     pb = small_trunk("corotational", n_cables=2)
     m = StaticModel(pb)

@@ -103,6 +103,7 @@ class _Config:
     A: np.ndarray | None  # C K^-1 H^T at this configuration (Step 1)
     S: np.ndarray | None  # K^-1 H^T: the first Gauss-Newton step of its backward solves
     Q: np.ndarray | None = None  # d2q/du2: that step's second-order predictor (reduced backward only)
+    Q_age: int = 0  # generations since Q was computed (BackwardSettings.curvature_age)
     violations: int = 0  # admissibility violations (bit mask), non-zero only when they are kept
     maps: dict | None = None  # effort, steerability, compliance, tilt, ... (:mod:`.maps`)
 
@@ -123,21 +124,24 @@ def algorithm1(ex: Exploration, executor: Executor, ctrl_c) -> None:
         ex.end_iteration()
 
 
-def _expand(model, q, u, A, S, Q, targets, scale, bsettings):
+def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0):
     """Step 3 for one configuration: backward solves of its targets; returns plain data per target.
 
     The sensitivities of each new configuration come from the backward's last Newton LU (at the
     second-order predictor, one iterate from the answer), refined with the exact tangent at the answer
     (A ~1 % off without, which the box would not notice but the next predictor would), and so does its
-    curvature Q (reduced backward: the second-order predictor of its own targets). They travel with the
+    curvature Q (reduced backward: the second-order predictor of its own targets), unless it takes this
+    configuration's Q, of age ``Q_age`` (``BackwardSettings.curvature_age``). They travel with the
     configuration, so expanding it needs no LU, in this process or in a worker, and the result does not
     depend on the number of workers.
     """
     out = []
     sens = (A, S) if Q is None else (A, S, Q)
+    passed_on = Q is not None and Q_age < _curvature_age(model, bsettings)
     for target in targets:
         res = backward(model, target, q, u, None, scale, bsettings, sens=sens)
         A_new = S_new = Q_new = maps = None
+        age = 0
         n_fac = res.factorizations
         violations = 0
         if res.ok:
@@ -146,18 +150,20 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings):
                 fac = tangent_factorization(model, res.q, res.u)
                 n_fac += 1
             violations = admissibility(model, res.q, res.u, fac).mask
-            A_new, S_new, Q_new, G = _derivatives(model, res.q, res.u, fac, scale, bsettings)
+            A_new, S_new, Q_new, G = _derivatives(model, res.q, res.u, fac, scale, bsettings, curved=not passed_on)
+            if passed_on:
+                Q_new, age = Q, Q_age + 1
             maps = point_maps(model, res.q, res.u, A_new, fac, G)
-        out.append((res.q, res.u, res.tip, res.status, res.ok, A_new, S_new, Q_new, res.equilibrium_solves,
+        out.append((res.q, res.u, res.tip, res.status, res.ok, A_new, S_new, Q_new, age, res.equilibrium_solves,
                     n_fac, violations, maps))
     return out
 
 
-def _derivatives(model, q, u, fac, eta, bsettings):
+def _derivatives(model, q, u, fac, eta, bsettings, curved: bool = True):
     """(A, S, Q, G) of a reached configuration from an LU near it, G the tip's compliance for its maps; Q (and
     the refinement by the exact tangent at q, when the LU was computed elsewhere: at the predictor, one iterate
     away) only for the reduced backward, whose predictor they feed (IPOPT's has none), Q only if it predicts
-    to second order."""
+    to second order and ``curved`` (not passed on from the configuration it was reached from)."""
     reduced = bsettings.formulation == "reduced"
     if np.array_equal(fac.q, q) or not reduced:
         K = None
@@ -166,7 +172,15 @@ def _derivatives(model, q, u, fac, eta, bsettings):
     else:
         K = model.residual_and_tangent(q, u)[1]
     A, S, G = sensitivity(model, q, fac, K, compliance=True)
-    return A, S, (curvature(model, q, u, S, fac, eta, K) if reduced and bsettings.second_order else None), G
+    Q = curvature(model, q, u, S, fac, eta, K) if reduced and bsettings.second_order and curved else None
+    return A, S, Q, G
+
+
+def _curvature_age(model, bsettings) -> int:
+    """How many generations a computed Q serves (``BackwardSettings.curvature_age``, ``auto`` resolved)."""
+    if bsettings.curvature_age != "auto":
+        return int(bsettings.curvature_age)
+    return 2 if model.n_u * (model.n_u + 1) >= model.element.tangent_cost else 0
 
 
 def _by_differences(model, bsettings) -> bool:
@@ -279,7 +293,7 @@ class Exploration:
     def backward(self, tasks, executor: Executor, ctrl_c) -> list:
         """Step 3: the backward solves of every task, warm-started from its configuration, in task order."""
         t = time.perf_counter()
-        jobs = [(cfg.q, cfg.u, cfg.A, cfg.S, cfg.Q, [tg for _, tg in todo], self.eta(cfg), self.bsettings)
+        jobs = [(cfg.q, cfg.u, cfg.A, cfg.S, cfg.Q, [tg for _, tg in todo], self.eta(cfg), self.bsettings, cfg.Q_age)
                 for cfg, todo in tasks]
         order = list(range(len(jobs)))
         if executor.workers > 1:
@@ -303,7 +317,7 @@ class Exploration:
         keep_inadmissible = self.problem.admissibility.keep
         for (cfg, todo), out in zip(tasks, answers):
             eta = self.eta(cfg)
-            for (cell, target), (q, u, tip, status, ok, A, S, Q, n_eq, n_fac, viol, maps) in zip(todo, out):
+            for (cell, target), (q, u, tip, status, ok, A, S, Q, age, n_eq, n_fac, viol, maps) in zip(todo, out):
                 self.counters["backward_solves"] += 1
                 self.counters["equilibrium_solves"] += n_eq
                 self.counters["factorizations"] += n_fac
@@ -326,7 +340,7 @@ class Exploration:
                         self.counters["explored"] += 1
                     if not on_target:
                         self.counters["adopted"] += 1
-                    new = _Config(cell, tip, q, u, A, S, Q, viol, maps)
+                    new = _Config(cell, tip, q, u, A, S, Q, age, viol, maps)
                     self._seed(new)
                     new_frontier.append(new)
                     self.reached.append(new)
@@ -394,6 +408,7 @@ class Exploration:
         if all(reached[i].Q is not None for i in fr):  # reduced backward
             arrays["frontier_Q"] = np.array([reached[i].Q for i in fr], dtype=np.float32).reshape(
                 len(fr), m.n_u * (m.n_u + 1) // 2, m.n_free)
+            arrays["frontier_Q_age"] = np.array([reached[i].Q_age for i in fr], dtype=np.int64)
         self.run.save({"counters": self.counters, "timings": self.timings}, arrays)
 
     def restore(self, meta: dict, a: dict) -> None:
@@ -408,6 +423,7 @@ class Exploration:
                                         a["frontier_q"][k] if f else (a["q"][i] if "q" in a else None), a["u"][i],
                                         a["frontier_A"][k] if f else None, a["frontier_S"][k] if f else None,
                                         a["frontier_Q"][k] if f and "frontier_Q" in a else None,
+                                        int(a["frontier_Q_age"][k]) if f and "frontier_Q" in a else 0,
                                         int(a["violations"][i])))
         self.frontier = [self.reached[i] for i in sorted(fset)]
         self.reached_cells = {c.cell for c in self.reached}
@@ -470,6 +486,9 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
     if settings.backward.tangent_products not in ("auto", "assembled", "differences"):
         raise ValueError(f"backward.tangent_products must be 'auto', 'assembled' or 'differences', "
                          f"got {settings.backward.tangent_products!r}")
+    age = settings.backward.curvature_age
+    if age != "auto" and (isinstance(age, bool) or not isinstance(age, (int, np.integer)) or age < 0):
+        raise ValueError(f"backward.curvature_age must be 'auto' or an integer >= 0, got {age!r}")
     with one_blas_thread():
         t0 = time.perf_counter()
         model = model or StaticModel(problem)
@@ -477,11 +496,12 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
         if settings.step is None:
             settings.step = default_step(model)
         # the budget is not part of the answer: a run stopped by it resumes with a larger one
-        # checkpoint format 7: the boundary surface's seeds (6: the contact map; 5: maps with the actuators'
-        # intensities; 4: reached points carry their maps, failures their closest points; 2: frontiers carry Q);
+        # checkpoint format 8: the frontier's Q ages (7: the boundary surface's seeds; 6: the contact map; 5: maps
+        # with the actuators' intensities; 4: reached points carry their maps, failures their closest points;
+        # 2: frontiers carry Q);
         # an older checkpoint would resume without them and so end with another result than an uninterrupted run
         fp = fingerprint("forward-backward", model, asdict(settings) | {"workers": None, "progress": None,
-                                                                         "max_cells": None, "format": 7})
+                                                                         "max_cells": None, "format": 8})
         run = RunState(checkpoint_dir, "forward-backward", fp, resume, t0)
 
         own = executor is None
@@ -498,7 +518,7 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
             grid = Grid(eq.tip, settings.step) if settings.strategy == "uniform" else None
             fac0 = tangent_factorization(model, eq.q, eq.u)
             A0, S0, Q0, G0 = _derivatives(model, eq.q, eq.u, fac0, settings.step, settings.backward)
-            start = _Config(grid.index(eq.tip) if grid else (0, 0, 0), eq.tip, eq.q, eq.u.copy(), A0, S0, Q0,
+            start = _Config(grid.index(eq.tip) if grid else (0, 0, 0), eq.tip, eq.q, eq.u.copy(), A0, S0, Q0, 0,
                             start_check.mask, point_maps(model, eq.q, eq.u, A0, fac0, G0))
             ex = Exploration(problem, model, settings, run, start, grid)
             ex.counters["equilibrium_solves"] += 1
