@@ -173,9 +173,16 @@ def test_face_nodes_start_from_the_nearest_reached_configurations(trunk3):
     assert abs(b.volume - cold.volume) < 1e-6 * abs(cold.volume)
 
 
-def test_seeds_ignore_an_input_without_range_and_more_than_three_inputs():
-    # a fixed input (u_min == u_max) has no surface to seed, nor have 4 inputs: no nodes, offers are no-ops
-    for lo, hi in (([0.0, 0.0, 0.0], [1.0, 0.0, 1.0]), ([0.0] * 4, [1.0] * 4)):
+def test_seeds_cover_the_faces_of_up_to_four_inputs_and_ignore_an_input_without_range():
+    # 4 inputs: every node of the 24 two-faces at n = 5, those with two or more inputs at a bound (5^4 - 3^4 -
+    # 4 * 2 * 3^3); an offer seeds the nodes it is nearest to
+    model = SimpleNamespace(u_min=np.zeros(4), u_max=np.ones(4), n_u=4)
+    s = Seeds(model, BoundarySettings())
+    assert len(s.nodes) == 5**4 - 3**4 - 4 * 2 * 3**3 == 328
+    s.offer(np.array([0.0, 0.0, 0.3, 0.6]), np.zeros(3), np.zeros((3, 4)))
+    assert len(s.of()) == 328 and len(s.configs) == 1
+    # a fixed input (u_min == u_max) has no surface to seed, nor have 5 inputs: no nodes, offers are no-ops
+    for lo, hi in (([0.0, 0.0, 0.0], [1.0, 0.0, 1.0]), ([0.0] * 5, [1.0] * 5)):
         model = SimpleNamespace(u_min=np.array(lo), u_max=np.array(hi), n_u=len(lo))
         s = Seeds(model, BoundarySettings())
         with np.errstate(all="raise"):
