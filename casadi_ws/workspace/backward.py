@@ -68,12 +68,12 @@ class BackwardSettings:
     """Reduced, in the forward-backward method, with ``second_order``: how many generations a computed Q serves. A
     configuration reached from one whose Q is younger than this takes that Q (its age plus one) instead of
     computing its own; 0: every reached configuration computes its own. Why: Q changes little over a cell, and a
-    Q a few cells old still predicts well enough for one LU in most solves; the solves it leaves to a second LU
-    cost less than the Q's saved where a Q costs more residuals, n_u(n_u + 1), than an assembled tangent
-    (``tangent_cost``). ``auto``: 2 there (4-node tetrahedra from 3 inputs, 10-node ones from 4), else 0.
-    Measured in one process (docs/methods.md, "Second-order predictor"), 0 against 2: 4-cable trunk 132.7 against
-    111.6 s (1.24 and 1.41 LUs per cell, the same cells; 3 took 111.7 s), 3-cable 49.4 against 46.6 s, 10-node
-    2-cable trunk 50.6 against 52.4 s."""
+    Q a few cells old still predicts well enough for one LU in most solves; the Q's saved (n_u(n_u + 1)
+    residuals and two solves each) then cost less than the second LUs they leave. ``auto``: 2 with linear
+    (4-node) tetrahedra, 0 with 10-node ones, as measured in one process, 0 against 2 (docs/methods.md,
+    "Second-order predictor"): the linear trunks took 15.3 / 49.4 / 132.7 s against 14.2 / 46.6 / 111.6 s
+    at 2 / 3 / 4 cables, the same cells; the 10-node trunk 46.7 against 49.7 s at 2 cables and 222.6
+    against 261.4 s at 3 (its Q changes more over a cell: 1.91 LUs per cell became 2.59)."""
     tangent_products: str = "auto"
     """Reduced, in the forward-backward method: how a reached configuration's S and Q (computed with the LU
     at its last predictor, one Newton iterate away) are refined against the tangent K at the answer.

@@ -180,7 +180,7 @@ def _curvature_age(model, bsettings) -> int:
     """How many generations a computed Q serves (``BackwardSettings.curvature_age``, ``auto`` resolved)."""
     if bsettings.curvature_age != "auto":
         return int(bsettings.curvature_age)
-    return 2 if model.n_u * (model.n_u + 1) >= model.element.tangent_cost else 0
+    return 2 if model.element.order == 1 else 0
 
 
 def _by_differences(model, bsettings) -> bool:
