@@ -199,6 +199,22 @@ tangent measures ~1e-16; the 4-node one 5e-3, which goes to SuperLU under ``auto
 _LIB: list = []
 
 
+def _mkl_rt() -> str | None:
+    """The mkl_rt library where pip's ``mkl`` wheel puts it (this environment's lib directory), or None.
+
+    Why: pypardiso looks for it with ``find_library`` and then a recursive glob of the whole environment, at
+    its import: 0.37 s of every process's start (the main one's and each worker's), before its first
+    factorisation. Given the path (``PYPARDISO_MKL_RT``), it loads it at once."""
+    import glob
+    import sys
+
+    for pattern in ("lib/libmkl_rt.so*", "lib/libmkl_rt*.dylib", "Library/bin/mkl_rt*.dll"):
+        found = sorted(glob.glob(f"{sys.prefix}/{pattern}"), key=len)
+        if found:
+            return found[0]
+    return None
+
+
 def _mkl():
     """MKL's ``pardiso`` entry point, from the mkl_rt that pypardiso finds."""
     if not _LIB:
@@ -207,6 +223,8 @@ def _mkl():
         # Intel's OpenMP threads spin 200 ms after each parallel region by default, holding the core that the
         # element kernels' threads (:mod:`casadi_ws.fem.kernels`) need next; read when the runtime starts
         os.environ.setdefault("KMP_BLOCKTIME", "0")
+        if "PYPARDISO_MKL_RT" not in os.environ and (path := _mkl_rt()) is not None:
+            os.environ["PYPARDISO_MKL_RT"] = path
         import pypardiso
 
         lib = pypardiso.PyPardisoSolver().libmkl
