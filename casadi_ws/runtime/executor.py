@@ -183,10 +183,17 @@ class ProcessExecutor(Executor):
         self._pool = self._start()
 
     def _start(self):
-        return ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"), initializer=_init_worker,
+        pool = ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"), initializer=_init_worker,
                                    initargs=(self._key, self._blob))
+        # a pool spawns its processes at its first submissions, each blocking the submitter until the child
+        # has imported the main module (~0.4 s): asked for here, from a thread, the workers start and build
+        # their models while this process builds its own and solves the first equilibrium
+        self._starter = threading.Thread(target=_start_workers, args=(pool, self.workers), daemon=True)
+        self._starter.start()
+        return pool
 
     def restart(self) -> None:
+        self._starter.join()
         self._pool.shutdown(wait=False, cancel_futures=True)
         self._pool = self._start()
 
@@ -208,7 +215,22 @@ class ProcessExecutor(Executor):
         return self._pool.submit(fn, *args)
 
     def close(self) -> None:
+        self._starter.join()
         self._pool.shutdown(cancel_futures=True)
+
+
+def _ready() -> None:
+    from ..solvers.linear import available
+
+    available("pardiso")  # MKL loaded before the first job
+
+
+def _start_workers(pool, workers: int) -> None:
+    try:
+        for _ in range(workers):
+            pool.submit(_ready)
+    except RuntimeError:  # shut down or broken meanwhile: the caller's own submissions say so
+        pass
 
 
 class SchedulerError(RuntimeError):
