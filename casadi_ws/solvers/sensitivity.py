@@ -223,10 +223,17 @@ def bounded_step(A: np.ndarray, r: np.ndarray, lo: np.ndarray, hi: np.ndarray) -
     A = np.asarray(A, dtype=float)
     n = A.shape[1]
     lo, hi = np.asarray(lo, dtype=float), np.minimum(np.maximum(hi, lo), np.inf)
+    free = hi > lo
+    first = None
+    if n and free.all():
+        # the first least-squares problem of the loop below, on its own: most targets are met inside the box
+        # (the exploration's neighbouring cells), and the loop's set-up costs more than this solve
+        first = np.linalg.lstsq(A, r, rcond=None)[0]
+        if np.all(first >= lo) and np.all(first <= hi):
+            return first
     x = np.clip(np.zeros(n), lo, hi)
     if n == 0:
         return x
-    free = hi > lo
     tol = 1e-12 * max(1.0, float(np.abs(A.T @ r).max()) if r.size else 1.0)
     for _ in range(10 * n + 10):
         # inner loop: least squares on the free variables, stepping back to the box when it leaves it
@@ -234,7 +241,10 @@ def bounded_step(A: np.ndarray, r: np.ndarray, lo: np.ndarray, hi: np.ndarray) -
             if not free.any():
                 break
             z = x.copy()
-            z[free] = np.linalg.lstsq(A[:, free], r - A[:, ~free] @ x[~free], rcond=None)[0]
+            if first is not None:  # all free, x = 0: r - A[:, ~free] @ x[~free] is r
+                z[free], first = first, None
+            else:
+                z[free] = np.linalg.lstsq(A[:, free], r - A[:, ~free] @ x[~free], rcond=None)[0]
             if np.all(z[free] >= lo[free]) and np.all(z[free] <= hi[free]):
                 x = z
                 break
