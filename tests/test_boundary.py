@@ -12,8 +12,8 @@ import pytest
 
 from casadi_ws.fem.model import StaticModel
 from casadi_ws.solvers.equilibrium import solve_equilibrium, tangent_factorization
-from casadi_ws.solvers.sensitivity import sensitivity
-from casadi_ws.workspace.boundary import BoundarySettings, Seeds, _closed, boundary, distance_outside
+from casadi_ws.solvers.sensitivity import curvature, sensitivity
+from casadi_ws.workspace.boundary import BoundarySettings, Seeds, _closed, _solve_nodes, boundary, distance_outside
 from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
 from casadi_ws.workspace.maps import point_maps
 from casadi_ws.workspace.measures import measures
@@ -171,6 +171,30 @@ def test_face_nodes_start_from_the_nearest_reached_configurations(trunk3):
     assert b.counters["factorizations"] < 0.8 * cold.counters["factorizations"]
     assert np.abs(b.vertices - cold.vertices).max() < 1e-6
     assert abs(b.volume - cold.volume) < 1e-6 * abs(cold.volume)
+
+
+def test_a_seed_with_its_curvature_predicts_a_face_node_to_second_order(trunk3):
+    # the exploration's d2q/du2 at the seed: the same equilibrium from a start nearer to it, for fewer LUs
+    u0 = np.array([20.0, 10.0, 0.0])
+    eq = solve_equilibrium(trunk3, u0)
+    fac = tangent_factorization(trunk3, eq.q, eq.u)
+    _, S = sensitivity(trunk3, eq.q, fac)
+    Q = curvature(trunk3, eq.q, eq.u, S, fac, 0.004)
+    us = np.array([[35.0, 25.0, 0.0]])
+    first = _solve_nodes(trunk3, us, [(u0, eq.q, S.astype(np.float32), None)])
+    second = _solve_nodes(trunk3, us, [(u0, eq.q, S.astype(np.float32), Q)])
+    assert first[1][0] == second[1][0] == 0
+    assert np.abs(first[0] - second[0]).max() < 1e-7
+    assert second[3] < first[3]
+    # and it is kept in a checkpoint's arrays, so a resumed run predicts the same
+    model = SimpleNamespace(u_min=np.zeros(3), u_max=np.full(3, 100.0), n_u=3)
+    s = Seeds(model, BoundarySettings())
+    s.offer(u0, eq.q, S, Q)
+    back = Seeds(model, BoundarySettings())
+    back.restore(s.arrays())
+    key = next(iter(s.of()))
+    for a, b in zip(s.of()[key], back.of()[key]):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_seeds_cover_the_faces_of_up_to_four_inputs_and_ignore_an_input_without_range():
