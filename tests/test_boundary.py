@@ -195,6 +195,10 @@ def test_a_seed_with_its_curvature_predicts_a_face_node_to_second_order(trunk3):
     key = next(iter(s.of()))
     for a, b in zip(s.of()[key], back.of()[key]):
         np.testing.assert_array_equal(a, b)
+    # a seed without Q (the IPOPT backward computes none) stays without after a resume, next to one with
+    s.offer(np.array([100.0, 0.0, 0.0]), eq.q, S)
+    back.restore(s.arrays())
+    assert sorted(c[3] is None for c in back.configs.values()) == [False, True]
 
 
 def test_seeds_cover_the_faces_of_up_to_four_inputs_and_ignore_an_input_without_range():

@@ -175,7 +175,7 @@ class Seeds:
                       if faces else np.zeros((0, n_u)))
         self.dist = np.full(len(self.nodes), np.inf)
         self.which = np.full(len(self.nodes), -1)
-        self.configs: dict = {}  # number -> (u, q, S) of the configurations that are some node's seed
+        self.configs: dict = {}  # number -> (u, q, S, Q) of the configurations that are some node's seed
         self._next = 0
 
     def offer(self, u, q, S, Q=None) -> None:
@@ -205,16 +205,23 @@ class Seeds:
                 "seed_dist": self.dist, "seed_u": np.array([c[0] for c in cfg]).reshape(len(cfg), len(self.lo)),
                 "seed_q": np.array([c[1] for c in cfg]).reshape(len(cfg), -1) if cfg else np.zeros((0, 0)),
                 "seed_S": np.array([c[2] for c in cfg], dtype=np.float32) if cfg else np.zeros((0, 0, 0), np.float32),
-                **({"seed_Q": np.array([c[3] for c in cfg], dtype=np.float32)}
-                   if cfg and all(c[3] is not None for c in cfg) else {})}
+                **_stacked_Q([c[3] for c in cfg])}
 
     def restore(self, a: dict) -> None:
         if "seed_which" not in a or len(a["seed_which"]) != len(self.nodes):
             return
         self.which, self.dist = a["seed_which"].copy(), a["seed_dist"].copy()
-        Q = a["seed_Q"] if "seed_Q" in a else [None] * len(a["seed_u"])
+        Q = [None if np.isnan(x).all() else x for x in a["seed_Q"]] if "seed_Q" in a else [None] * len(a["seed_u"])
         self.configs = dict(enumerate(zip(a["seed_u"], a["seed_q"], a["seed_S"], Q)))
         self._next = len(self.configs)
+
+
+def _stacked_Q(Qs: list) -> dict:
+    """The seeds' Q as one checkpoint array (NaN for a seed without), or nothing if none has one."""
+    shape = next((Q.shape for Q in Qs if Q is not None), None)
+    if shape is None:
+        return {}
+    return {"seed_Q": np.array([np.full(shape, np.nan, np.float32) if Q is None else Q for Q in Qs], np.float32)}
 
 
 def _key(s):
