@@ -257,3 +257,20 @@ def test_the_methods_run_pardiso_on_one_thread_though_mkl_is_loaded_inside_them(
     default = subprocess.run([sys.executable, "-c", "from casadi_ws.solvers import linear; print(linear._threads())"],
                              capture_output=True, text=True, env=env, timeout=120)
     assert out.stdout.split() == ["1", "1", default.stdout.strip()], out.stderr[-2000:]
+
+
+def test_the_methods_keep_numpy_arrays_in_small_pages_and_restore_the_setting():
+    """:func:`casadi_ws.runtime.executor.small_pages`: NumPy's huge-page requests off inside a method (first
+    touches stalled seconds on fragmented memory), back on after; left alone where the environment sets it."""
+    code = ("from numpy._core import multiarray as m\n"
+            "from casadi_ws.runtime.executor import small_pages\n"
+            "with small_pages():\n"
+            "    inside = m._set_madvise_hugepage(False)\n"
+            "    m._set_madvise_hugepage(inside)\n"
+            "print(inside, m._set_madvise_hugepage(True))\n")
+    env = {k: v for k, v in __import__("os").environ.items() if k != "NUMPY_MADVISE_HUGEPAGE"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert out.stdout.split() == ["False", "True"], out.stderr[-2000:]
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         env=env | {"NUMPY_MADVISE_HUGEPAGE": "1"})
+    assert out.stdout.split() == ["True", "True"], out.stderr[-2000:]

@@ -19,6 +19,8 @@ OpenBLAS's threads slow this workload down: SuperLU and the small dense least-sq
 blocks too small to share, and two processes each running two BLAS threads on two cores fight. Measured on
 the trunk: a backward solve takes 0.29 s with one BLAS thread against 0.40 s with the default, a forward
 point 33 ms against 36 ms. The methods therefore run with one BLAS thread (:func:`one_blas_thread`).
+
+They also run with NumPy's large arrays in small pages (:func:`small_pages`).
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ from typing import Callable, Iterator
 from .run_state import problem_fingerprint
 
 __all__ = ["DaskExecutor", "Executor", "ProcessExecutor", "SerialExecutor", "SchedulerError", "deferred_interrupt",
-           "make_executor", "model_for", "one_blas_thread"]
+           "make_executor", "model_for", "one_blas_thread", "small_pages"]
 
 
 @contextlib.contextmanager
@@ -47,6 +49,38 @@ def one_blas_thread():
 
     with threadpool_limits(limits=1, user_api="blas"), one_mkl_thread():
         yield
+
+
+@contextlib.contextmanager
+def small_pages():
+    """Run the enclosed code with NumPy's arrays of 4 MB and more in ordinary pages (restored afterwards),
+    unless ``NUMPY_MADVISE_HUGEPAGE`` says otherwise.
+
+    Why: NumPy asks Linux for transparent huge pages for such arrays, and where the kernel then compacts memory
+    to find one (``defrag`` = ``madvise``, the usual setting) while memory is fragmented, the first touch of an
+    array stalls. Measured on the developers' virtual machines (Linux 6.18, 24 GiB, 6 GiB of page cache): a
+    250 MB array took 2.7-4.0 s to fill or copy the first time against 0.1 s in small pages; the forward sweep
+    of the 3-cable trunk at n_d = 30, whose cube keeps 0.3 GB of states, took 81 and 67 s in one process,
+    42.7-45.7 and 38.4-39.7 s with 2 workers. The arrays that are large here are states and sensitivities,
+    read a few times each: huge pages would save little in address translation."""
+    before = _huge_pages(False)
+    try:
+        yield
+    finally:
+        if before is not None:
+            _huge_pages(before)
+
+
+def _huge_pages(enabled: bool) -> bool | None:
+    """Whether NumPy asks for huge pages from now on; returns the setting before, or None (nothing changed)
+    where NumPy has no such switch or ``NUMPY_MADVISE_HUGEPAGE`` is set."""
+    import numpy as np
+
+    core = getattr(np, "_core", None) or getattr(np, "core", None)
+    toggle = getattr(getattr(core, "multiarray", None), "_set_madvise_hugepage", None)
+    if toggle is None or "NUMPY_MADVISE_HUGEPAGE" in os.environ:
+        return None
+    return bool(toggle(bool(enabled)))
 
 
 _MODELS: dict[str, object] = {}
@@ -75,13 +109,13 @@ def _call(fn, key, blob, job):
 
 
 def _plain_one_thread(fn, args):
-    with one_blas_thread():
+    with one_blas_thread(), small_pages():
         return fn(*args)
 
 
 def _call_one_thread(fn, key, blob, job):
     # a Dask worker process is not ours to configure at start: limit BLAS around each job
-    with one_blas_thread():
+    with one_blas_thread(), small_pages():
         return fn(model_for(blob, key), *job)
 
 
@@ -163,6 +197,7 @@ def _init_worker(key, blob):
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(limits=1, user_api="blas")  # for the worker's lifetime
+    _huge_pages(False)  # likewise (see small_pages)
     if blob is not None:
         model_for(blob, key)  # built while the caller still prepares the first jobs
 

@@ -26,7 +26,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from ..fem.model import StaticModel
-from ..runtime.executor import Executor, deferred_interrupt, make_executor, one_blas_thread
+from ..runtime.executor import Executor, deferred_interrupt, make_executor, one_blas_thread, small_pages
 from ..runtime.run_state import RunState, fingerprint
 from ..solvers.admissible import VIOLATIONS, admissibility, encode
 from ..solvers.equilibrium import (CONVERGED, OUTSIDE_BOUNDS, Equilibrium, inside_bounds, newton_krylov,
@@ -551,7 +551,7 @@ def forward(problem, n_d: int | None = None, settings: ForwardSettings | None = 
     and when interrupted (Ctrl-C); ``resume=True`` continues from it (see :mod:`casadi_ws.runtime.run_state`).
     ``executor`` runs slices of the grid (default: ``settings.workers`` processes, or this process).
     """
-    with one_blas_thread():
+    with one_blas_thread(), small_pages():
         return _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor)
 
 

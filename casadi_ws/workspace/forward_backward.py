@@ -33,7 +33,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from ..fem.model import StaticModel
-from ..runtime.executor import Executor, deferred_interrupt, make_executor, one_blas_thread
+from ..runtime.executor import Executor, deferred_interrupt, make_executor, one_blas_thread, small_pages
 from ..runtime.run_state import RunState, fingerprint
 from ..solvers.admissible import VIOLATIONS, admissibility, decode
 from ..solvers.equilibrium import CONVERGED, solve_equilibrium, tangent_factorization
@@ -489,7 +489,7 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
     age = settings.backward.curvature_age
     if age != "auto" and (isinstance(age, bool) or not isinstance(age, (int, np.integer)) or age < 0):
         raise ValueError(f"backward.curvature_age must be 'auto' or an integer >= 0, got {age!r}")
-    with one_blas_thread():
+    with one_blas_thread(), small_pages():
         t0 = time.perf_counter()
         model = model or StaticModel(problem)
         build_model = time.perf_counter() - t0
