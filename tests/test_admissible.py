@@ -136,6 +136,17 @@ def test_an_inverted_element_is_refused_for_every_law(model):
     assert "inverted" not in admissibility(m, q, np.zeros(0)).violations
 
 
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_the_compiled_jacobians_are_the_determinants_of_the_deformation_gradients(order):
+    mesh = box_mesh((0.02, 0.02, 0.04), (2, 2, 3) if order == 1 else (1, 1, 2))
+    mesh = quadratic(mesh) if order == 2 else mesh
+    pb = Problem(mesh, Material("corotational", 1e6, 0.3), nodes_on_plane(mesh, [0, 0, 0], [0, 0, 1]), [],
+                 np.array([0.01, 0.01, 0.04]))
+    m = cw.StaticModel(pb)
+    q = 0.004 * np.random.default_rng(3).standard_normal(m.n_dof)
+    np.testing.assert_allclose(m.jacobians(q), np.linalg.det(m.deformation_gradients(q)), rtol=1e-12, atol=1e-14)
+
 def _bent(mesh, angle):
     """The beam along +z bent into a circular arc of the given total angle about the y axis."""
     X = mesh.nodes

@@ -461,6 +461,19 @@ class StaticModel:
         m, nq = self._G_qp.shape[:2]
         return np.eye(3) + (self._F_op @ q).reshape(m, nq, 3, 3)
 
+    def jacobians(self, q: np.ndarray) -> np.ndarray:
+        """det F at every quadrature point, (m, n_qp), from the element's nodal displacements.
+
+        Why not from :meth:`deformation_gradients`: every verified point of a sweep asks for it (the inversion
+        check), and F through a sparse map of q, then its determinant, took ~0.25 ms per point on the linear
+        trunk, half its residual's time; one compiled pass over the elements reads only their displacements
+        and shape gradients."""
+        if "_det_kernel" not in self.__dict__:
+            m, nq, nn, _ = self._G_qp.shape
+            self._det_kernel = ElementBatch(_det_f_function(nq, nn), "c" if self.backend == "c" else "casadi")
+        m = self._G_qp.shape[0]
+        return self._det_kernel(q[self._edofs], self._G_qp.reshape(m, -1))[0]
+
     def internal_force(self, q: np.ndarray, norm: bool = False):
         """f_int(q) on all dofs (3n,); with ``norm``, also the norm of the unassembled element forces.
 
@@ -844,3 +857,19 @@ class StaticModel:
         q = np.zeros(self.n_dof)
         q[self.free] = q_free
         return q
+
+
+def _det_f_function(n_qp: int, n_nodes: int) -> ca.Function:
+    """det F at each quadrature point of an element, from its displacements (3 per node, node-major) and its
+    shape-function gradients at the quadrature points ((point, node, 3) flattened), as
+    :meth:`StaticModel.deformation_gradients` builds F: F_ij = delta_ij + sum_a u_ai dN_a/dX_j."""
+    u = ca.SX.sym("u", 3 * n_nodes)
+    G = ca.SX.sym("G", 3 * n_nodes * n_qp)
+    dets = []
+    for k in range(n_qp):
+        F = [[(1.0 if i == j else 0.0) + sum(u[3 * a + i] * G[(k * n_nodes + a) * 3 + j] for a in range(n_nodes))
+              for j in range(3)] for i in range(3)]
+        dets.append(F[0][0] * (F[1][1] * F[2][2] - F[1][2] * F[2][1])
+                    - F[0][1] * (F[1][0] * F[2][2] - F[1][2] * F[2][0])
+                    + F[0][2] * (F[1][0] * F[2][1] - F[1][1] * F[2][0]))
+    return ca.Function("det_F", [u, G], [ca.vertcat(*dets)])
