@@ -352,7 +352,8 @@ def _check_line(model, line) -> tuple[np.ndarray, np.ndarray]:
             continue
         if done[j]:
             fac = eq.factorization if eq.factorization is not None else tangent_factorization(model, eq.q, eq.u)
-            m = point_maps(model, eq.q, eq.u, sensitivity(model, eq.q, fac)[0], fac)
+            A, _, G = sensitivity(model, eq.q, fac, compliance=True)  # one set of solves for both
+            m = point_maps(model, eq.q, eq.u, A, fac, G)
         else:
             m = state_maps(model, eq.q, eq.u) | {"steerability": np.nan, "compliance": np.nan}
         maps[j] = [m[name] for name in MAPS] + list(m["states"]) + list(m["intensities"])
@@ -446,7 +447,8 @@ def _own_checks(model, eq):
     fac = eq.factorization if eq.factorization is not None else tangent_factorization(model, eq.q, eq.u)
     eq.factorization = None
     mask = admissibility(model, eq.q, eq.u, fac).mask
-    m = point_maps(model, eq.q, eq.u, sensitivity(model, eq.q, fac)[0], fac)
+    A, _, G = sensitivity(model, eq.q, fac, compliance=True)
+    m = point_maps(model, eq.q, eq.u, A, fac, G)
     return mask, np.array([m[name] for name in MAPS] + list(m["states"]) + list(m["intensities"]))
 
 
