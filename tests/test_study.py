@@ -252,6 +252,21 @@ def test_a_process_pool_that_lost_a_worker_restarts():
         assert ex.submit(abs, -1).result() == 1
 
 
+
+def test_a_script_without_the_main_guard_fails_at_once_with_the_reason(tmp_path):
+    """Python's 'spawn' imports the caller's script again in every worker: without the guard each worker
+    would start a pool of its own. It used to hang for ever (the parent's write of what starts a worker
+    waited on a worker that had died); now the workers refuse, the parent stops, and both say why."""
+    script = tmp_path / "no_guard.py"
+    script.write_text("import casadi_ws as cw\n"
+                      f"p = cw.load_problem({str(REPO / 'problems' / 'trunk_2cables.yaml')!r})\n"
+                      "cw.forward_backward(p, settings=cw.FBSettings(workers=2, progress=False))\n")
+    t = time.perf_counter()
+    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert r.returncode != 0 and time.perf_counter() - t < 60
+    assert "must do so under 'if __name__ == \"__main__\":'" in r.stderr
+    assert "BrokenProcessPool: a worker process ended while running" in r.stderr
+
 def test_the_documented_study_file_is_valid(tmp_path):
     import re
 

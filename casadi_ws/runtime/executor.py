@@ -30,8 +30,11 @@ import multiprocessing as mp
 import os
 import pickle
 import signal
+import tempfile
 import threading
+import weakref
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from typing import Callable, Iterator
 
 from .run_state import problem_fingerprint
@@ -193,13 +196,19 @@ class _Ready:
         return self._value
 
 
-def _init_worker(key, blob):
+def _init_worker(key, blob_file):
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(limits=1, user_api="blas")  # for the worker's lifetime
     _huge_pages(False)  # likewise (see small_pages)
-    if blob is not None:
-        model_for(blob, key)  # built while the caller still prepares the first jobs
+    if blob_file is not None:
+        with open(blob_file, "rb") as f:
+            model_for(f.read(), key)  # built while the caller still prepares the first jobs
+
+
+def _remove(path: str) -> None:
+    with contextlib.suppress(OSError):
+        os.unlink(path)
 
 
 class ProcessExecutor(Executor):
@@ -207,19 +216,33 @@ class ProcessExecutor(Executor):
 
     Given a ``problem``, every worker builds its model at start and jobs of that problem send no copy of it;
     jobs of other problems carry it (pickled once per call, unpickled by a worker only to build its model).
+    The workers read the problem from a temporary file, not from what starts them: Python writes that to a
+    new worker through a pipe (64 KiB) before the worker reads it, and where the worker dies first (a script
+    without the ``__main__`` guard) the write never ended.
     """
 
     def __init__(self, workers: int, problem=None):
+        if getattr(mp.current_process(), "_inheriting", False):
+            # this is a worker importing the caller's script (Python's 'spawn' runs it again in every worker):
+            # without the guard the script would start pools of its own, and the pool that started this worker
+            # would wait for it forever
+            raise RuntimeError("casadi-ws: a script that runs a method with more than one worker must do so under "
+                               "'if __name__ == \"__main__\":' (every worker process imports the script again)")
         self.workers = int(workers)
         for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ.setdefault(var, "1")  # inherited by the children before they import numpy
         self._key = None if problem is None else problem_fingerprint(problem)
-        self._blob = None if problem is None else pickle.dumps(problem, protocol=4)
+        self._blob_file = None
+        if problem is not None:
+            fd, self._blob_file = tempfile.mkstemp(prefix="casadi-ws-problem-", suffix=".pickle")
+            with os.fdopen(fd, "wb") as f:
+                pickle.dump(problem, f, protocol=4)
+            weakref.finalize(self, _remove, self._blob_file)
         self._pool = self._start()
 
     def _start(self):
         pool = ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"), initializer=_init_worker,
-                                   initargs=(self._key, self._blob))
+                                   initargs=(self._key, self._blob_file))
         _large_pipes(pool)
         # a pool spawns its processes at its first submissions, each blocking the submitter until the child
         # has imported the main module (~0.4 s): asked for here, from a thread, the workers start and build
@@ -243,6 +266,9 @@ class ProcessExecutor(Executor):
                 done, pending = wait(pending, return_when=FIRST_COMPLETED)
                 for f in done:
                     yield futures[f], f.result()
+        except BrokenProcessPool:
+            raise BrokenProcessPool("a worker process ended while running (killed, out of memory, or a script "
+                                    "that starts workers outside 'if __name__ == \"__main__\":')") from None
         finally:
             for f in pending:
                 f.cancel()
@@ -253,6 +279,8 @@ class ProcessExecutor(Executor):
     def close(self) -> None:
         self._starter.join()
         self._pool.shutdown(cancel_futures=True)
+        if self._blob_file is not None:
+            _remove(self._blob_file)
 
 
 PIPE_BYTES = 1 << 20
