@@ -168,3 +168,14 @@ def _check_outputs(outputs, tmp_path):
             if "cells" in res.arrays:  # every reported tip lies in its reported cell
                 step, origin = float(res.arrays["cell_step"]), res.arrays["grid_origin"]
                 np.testing.assert_array_equal(np.round((res.points - origin) / step), res.arrays["cells"])
+
+
+def test_the_readme_python_script_runs_as_written(tmp_path):
+    """The README's ```python block, saved as a script and run from a folder with the problems (the results
+    it saves land there)."""
+    block, = re.findall(r"```python\n(.*?)```", (REPO / "README.md").read_text(), flags=re.S)
+    (tmp_path / "problems").symlink_to(REPO / "problems")
+    (tmp_path / "script.py").write_text(block)
+    r = subprocess.run([sys.executable, "script.py"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "coverage" in r.stdout and (tmp_path / "results" / "fb" / "summary.json").exists()
