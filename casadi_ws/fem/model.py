@@ -469,7 +469,7 @@ class StaticModel:
         trunk, half its residual's time; one compiled pass over the elements reads only their displacements
         and shape gradients."""
         if "_det_kernel" not in self.__dict__:
-            m, nq, nn, _ = self._G_qp.shape
+            _, nq, nn, _ = self._G_qp.shape
             self._det_kernel = ElementBatch(_det_f_function(nq, nn), "c" if self.backend == "c" else "casadi")
         m = self._G_qp.shape[0]
         return self._det_kernel(q[self._edofs], self._G_qp.reshape(m, -1))[0]
