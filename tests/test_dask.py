@@ -1,5 +1,6 @@
 """Dask as the execution engine (issue: design studies): a LocalCluster gives the serial run's points, a
-worker killed mid-sweep costs nothing but time, and an unreachable scheduler fails fast."""
+worker killed mid-sweep costs nothing but time, even with the only copy of the problem, and an unreachable
+scheduler fails fast."""
 
 import os
 import signal
@@ -63,6 +64,28 @@ def test_a_worker_killed_mid_sweep_changes_nothing(trunk):
     # the lost slice ran again elsewhere, from the same start: the same points, bit for bit
     np.testing.assert_array_equal(calm.u, dask.u)
     np.testing.assert_array_equal(calm.points, dask.points)
+
+
+@pytest.mark.slow
+def test_the_problem_lost_with_the_worker_that_held_its_only_copy_is_sent_again(trunk):
+    # once no task waits for the scattered problem, the scheduler keeps one copy of it (its active memory
+    # manager); a worker killed with it used to cancel every later task ("lost dependencies")
+    pb, m = trunk
+    s = cw.ForwardSettings(n_d=14, progress=False)
+    with cw.DaskExecutor(workers=2, problem=pb) as ex:
+        calm = cw.forward(pb, settings=s, model=m, executor=ex)
+        blob, = ex._blobs.values()
+        for _ in range(100):
+            holders = ex.client.who_has(blob)[blob.key]
+            if len(holders) == 1:
+                break
+            time.sleep(0.1)
+        else:
+            pytest.fail(f"the problem stayed on {len(holders)} workers")
+        pid = ex.client.run(os.getpid, workers=list(holders))[holders[0]]
+        os.kill(pid, signal.SIGKILL)
+        again = cw.forward(pb, settings=s, model=m, executor=ex)
+    np.testing.assert_array_equal(calm.points, again.points)
 
 
 def test_unreachable_scheduler_fails_fast_with_the_address():

@@ -33,7 +33,7 @@ import signal
 import tempfile
 import threading
 import weakref
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, CancelledError, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Callable, Iterator
 
@@ -328,7 +328,8 @@ class DaskExecutor(Executor):
 
     The problem travels once to every worker (``Client.scatter(broadcast=True)``); each worker builds its
     model on its first job of that problem and keeps it. Tasks lost with a worker are run again elsewhere by
-    the scheduler, and the jobs are deterministic, so the results are the same. Workers must run one thread
+    the scheduler (and by this executor, with the problem scattered again, where the worker held its last
+    copy), and the jobs are deterministic, so the results are the same. Workers must run one thread
     each: IPOPT under CasADi is not thread-safe.
 
     ``window`` tasks at most are in flight per ``map_unordered`` (default: two per worker), the next job
@@ -362,7 +363,8 @@ class DaskExecutor(Executor):
     def _blob(self, problem):
         key = problem_fingerprint(problem)
         if key not in self._blobs:
-            self._blobs[key] = self.client.scatter(pickle.dumps(problem, protocol=4), broadcast=True)
+            # (a new key each time: one scattered again after a loss must not be taken for the lost one)
+            self._blobs[key] = self.client.scatter(pickle.dumps(problem, protocol=4), broadcast=True, hash=False)
         return key, self._blobs[key]
 
     def map_unordered(self, fn, problem, jobs):
@@ -370,15 +372,18 @@ class DaskExecutor(Executor):
 
         key, blob = self._blob(problem)
         todo = iter(enumerate(jobs))
-        index, live = {}, set()
+        index, live, job_of, resent = {}, set(), {}, {}
         done = as_completed()
+
+        def submit(i, job):
+            f = self.client.submit(_call_one_thread, fn, key, blob, job, pure=False)
+            index[f.key], job_of[f.key] = i, job
+            live.add(f)
+            done.add(f)
 
         def submit_next():
             for i, job in todo:
-                f = self.client.submit(_call_one_thread, fn, key, blob, job, pure=False)
-                index[f.key] = i
-                live.add(f)
-                done.add(f)
+                submit(i, job)
                 return
 
         for _ in range(self.window):
@@ -386,8 +391,23 @@ class DaskExecutor(Executor):
         try:
             for f in done:
                 live.discard(f)
+                job = job_of.pop(f.key)
+                try:
+                    out = f.result()
+                except CancelledError:
+                    # the scheduler keeps one copy of the scattered problem once no task waits for it (its
+                    # active memory manager); a task that then needs it on a worker lost meanwhile is
+                    # cancelled ("lost dependencies"), not run again: the problem is scattered anew and the
+                    # job resubmitted, a few times at most
+                    resent[index[f.key]] = resent.get(index[f.key], 0) + 1
+                    if resent[index[f.key]] > 3:
+                        raise
+                    self._blobs.pop(key, None)
+                    key, blob = self._blob(problem)
+                    submit(index[f.key], job)
+                    continue
                 submit_next()
-                yield index[f.key], f.result()
+                yield index[f.key], out
         finally:
             self.client.cancel([f for f in live if not f.done()])
 
