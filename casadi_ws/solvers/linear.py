@@ -284,6 +284,8 @@ class _Pattern:
         self.canonical = np.where(K.indices == col, np.diff(K.indptr)[col].astype(float), -1.0)
         upper = K.indices >= col
         self.upper = np.flatnonzero(upper)
+        # K^T's entries at the upper triangle's: (K + K^T) / 2 there is gathered from half of K's entries
+        self.upper_t = None if self.transpose is None else self.transpose[self.upper]
         self.u_indptr = np.concatenate([[0], np.cumsum(np.bincount(col[upper], minlength=self.n))]).astype(np.int32)
         self.u_indices = K.indices[upper].astype(np.int32)
         self.f_indptr, self.f_indices = K.indptr.astype(np.int32), K.indices.astype(np.int32)
@@ -500,7 +502,7 @@ def symmetric_part_positive_definite(K) -> bool | None:
     pattern = _pattern_of(K, True)
     if pattern.transpose is None:
         return None
-    data = (0.5 * (K.data + K.data[pattern.transpose]))[pattern.upper]
+    data = 0.5 * (K.data[pattern.upper] + K.data[pattern.upper_t])
     for single in (True, False):
         try:
             n = _PardisoLU(_analysis(pattern, True, single, cholesky=single), data).negative_pivots()
