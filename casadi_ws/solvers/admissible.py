@@ -276,6 +276,11 @@ def penetrating_samples(model, q: np.ndarray, depth: float = 0.01) -> np.ndarray
 
     S = _samples(model)
     x = model.positions(q)
+    # first with a bound of the radii below, 3/4 of the longest edge: on the trunk it settles most calls in
+    # ~0.1 ms, where the radii take ~0.3 ms
+    d = x[S.edges[:, 0]] - x[S.edges[:, 1]]
+    if not _clusters_meet(S, x, 1.5 * (1 + 1e-9) * float(np.sqrt(np.einsum("ij,ij->i", d, d).max()))):
+        return np.zeros(0, dtype=np.int64)
     tets = model.mesh.tets
     c0, c1, c2, c3 = (x[tets[:, a]] for a in range(4))  # curved 10-node elements judged by their corners
     centre = 0.25 * (c0 + c1 + c2 + c3)
@@ -331,6 +336,8 @@ class _Samples:
     """Where each cluster starts in ``order``."""
     far: np.ndarray
     """(k, 2) pairs of clusters more than NEAR_AT_REST largest-element diameters apart at rest."""
+    edges: np.ndarray
+    """(e, 2) the edges of the tetrahedra's corners, each once."""
 
 
 CLUSTER = 2.0
@@ -393,7 +400,9 @@ def _samples(model) -> _Samples:
     i, j = np.triu_indices(len(starts), k=1)
     gap = np.linalg.norm(np.maximum(0.0, np.maximum(lo[i] - hi[j], lo[j] - hi[i])), axis=1)
     far = np.column_stack([i, j])[gap > NEAR_AT_REST * diameter]
-    out = _Samples(W, keys, order, starts, far)
+    pairs = np.sort(np.stack([mesh.tets[:, [0, 0, 0, 1, 1, 2]], mesh.tets[:, [1, 2, 3, 2, 3, 3]]], axis=2)
+                    .reshape(-1, 2), axis=1)
+    out = _Samples(W, keys, order, starts, far, np.unique(pairs, axis=0))
     model.__dict__["_penetration_samples"] = out
     return out
 
