@@ -40,17 +40,20 @@ def test_local_cluster_forward_and_fb_equal_the_serial_runs(trunk):
     np.testing.assert_array_equal(np.asarray(c.arrays["cells"]), np.asarray(d.arrays["cells"]))
 
 
+def _sweep(trunk, ex):
+    pb, m = trunk
+    return cw.forward(pb, settings=cw.ForwardSettings(n_d=14, progress=False), model=m, executor=ex)
+
+
 @pytest.mark.slow
 def test_a_worker_killed_mid_sweep_changes_nothing(trunk):
-    pb, m = trunk
-    s = cw.ForwardSettings(n_d=14, progress=False)
-    with cw.DaskExecutor(workers=2, problem=pb) as ex:
-        calm = cw.forward(pb, settings=s, model=m, executor=ex)
+    with cw.DaskExecutor(workers=2, problem=trunk[0]) as ex:
+        calm = _sweep(trunk, ex)
         pids = list(ex.client.run(os.getpid).values())
         killer = threading.Timer(1.0, os.kill, (pids[0], signal.SIGKILL))
         killer.start()
         t = time.perf_counter()
-        dask = cw.forward(pb, settings=s, model=m, executor=ex)
+        dask = _sweep(trunk, ex)
         killer.join()
         assert time.perf_counter() - t > 1.0  # the kill happened during the sweep
     for _ in range(50):  # the worker process is gone (its nanny reaps it and starts another)
@@ -70,10 +73,8 @@ def test_a_worker_killed_mid_sweep_changes_nothing(trunk):
 def test_the_problem_lost_with_the_worker_that_held_its_only_copy_is_sent_again(trunk):
     # once no task waits for the scattered problem, the scheduler keeps one copy of it (its active memory
     # manager); a worker killed with it used to cancel every later task ("lost dependencies")
-    pb, m = trunk
-    s = cw.ForwardSettings(n_d=14, progress=False)
-    with cw.DaskExecutor(workers=2, problem=pb) as ex:
-        calm = cw.forward(pb, settings=s, model=m, executor=ex)
+    with cw.DaskExecutor(workers=2, problem=trunk[0]) as ex:
+        calm = _sweep(trunk, ex)
         blob, = ex._blobs.values()
         for _ in range(100):
             holders = ex.client.who_has(blob)[blob.key]
@@ -84,7 +85,7 @@ def test_the_problem_lost_with_the_worker_that_held_its_only_copy_is_sent_again(
             pytest.fail(f"the problem stayed on {len(holders)} workers")
         pid = ex.client.run(os.getpid, workers=list(holders))[holders[0]]
         os.kill(pid, signal.SIGKILL)
-        again = cw.forward(pb, settings=s, model=m, executor=ex)
+        again = _sweep(trunk, ex)
     np.testing.assert_array_equal(calm.points, again.points)
 
 
