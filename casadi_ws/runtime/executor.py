@@ -377,7 +377,7 @@ class DaskExecutor(Executor):
 
         def submit(i, job):
             f = self.client.submit(_call_one_thread, fn, key, blob, job, pure=False)
-            index[f.key], job_of[f.key] = i, job
+            index[f.key], job_of[f.key] = i, (job, blob)
             live.add(f)
             done.add(f)
 
@@ -391,7 +391,7 @@ class DaskExecutor(Executor):
         try:
             for f in done:
                 live.discard(f)
-                job = job_of.pop(f.key)
+                job, sent_with = job_of.pop(f.key)
                 try:
                     out = f.result()
                 except CancelledError:
@@ -402,8 +402,9 @@ class DaskExecutor(Executor):
                     resent[index[f.key]] = resent.get(index[f.key], 0) + 1
                     if resent[index[f.key]] > 3:
                         raise
-                    self._blobs.pop(key, None)
-                    key, blob = self._blob(problem)
+                    if sent_with is blob:  # (the tasks in flight with it share one new copy)
+                        self._blobs.pop(key, None)
+                        key, blob = self._blob(problem)
                     submit(index[f.key], job)
                     continue
                 submit_next()
