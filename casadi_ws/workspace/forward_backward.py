@@ -163,15 +163,6 @@ _PREFILTERED = (None, None, None, int(Status.PREFILTERED), False, None, None, No
 """A target the prefilter dropped, as :func:`_expand` answers for a target it solved."""
 
 
-def linear_gap(model, q, u, p, A, target, eta, bsettings) -> float:
-    """Infinity-norm distance from the target's cell to the reachable set linearised at (q, u), tip p."""
-    lo, hi, _ = input_range(model, q, u)
-    gap = np.abs(p + A @ bounded_step(A, target - p, lo, hi) - target).max() - 0.5 * eta
-    if gap > 0 and bsettings.edge_box is not None:  # the centre is out of reach: any point of the cell?
-        gap = min(gap, closest_to_box(A, target - p, lo, hi, 0.5 * eta)[1])
-    return gap
-
-
 def _derivatives(model, q, u, fac, eta, bsettings, curved: bool = True):
     """(A, S, Q, G) of a reached configuration from an LU near it, G the tip's compliance for its maps; Q (and
     the refinement by the exact tangent at q, when the LU was computed elsewhere: at the predictor, one iterate
@@ -295,8 +286,15 @@ class Exploration:
             # contacts that releasing an input would open, and misses those a step would close (the tip then
             # slides along the obstacle or the body)
             return [True] * len(targets)
-        return [linear_gap(self.model, cfg.q, cfg.u, cfg.p, cfg.A, tg, eta, self.bsettings) <= threshold * eta
-                for tg in targets]
+        return [self._linear_gap(cfg, tg, eta) <= threshold * eta for tg in targets]
+
+    def _linear_gap(self, cfg, target, eta) -> float:
+        """Infinity-norm distance from the target's cell to the linearised reachable set at cfg."""
+        lo, hi, _ = input_range(self.model, cfg.q, cfg.u)
+        gap = np.abs(cfg.p + cfg.A @ bounded_step(cfg.A, target - cfg.p, lo, hi) - target).max() - 0.5 * eta
+        if gap > 0 and self.bsettings.edge_box is not None:  # the centre is out of reach: any point of the cell?
+            gap = min(gap, closest_to_box(cfg.A, target - cfg.p, lo, hi, 0.5 * eta)[1])
+        return gap
 
     def backward(self, tasks, executor: Executor, ctrl_c) -> list:
         """Step 3: the backward solves of every task, warm-started from its configuration, in task order.
