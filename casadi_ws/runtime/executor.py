@@ -33,7 +33,7 @@ import signal
 import tempfile
 import threading
 import weakref
-from concurrent.futures import FIRST_COMPLETED, CancelledError, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, CancelledError, ProcessPoolExecutor, as_completed, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Callable, Iterator
 
@@ -262,10 +262,9 @@ class ProcessExecutor(Executor):
         futures = {self._pool.submit(_call, fn, key, blob, job): i for i, job in enumerate(jobs)}
         pending = set(futures)
         try:
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for f in done:
-                    yield futures[f], f.result()
+            for f in as_completed(futures):  # one waiter per future (wait() adds one to each pending per call)
+                pending.discard(f)
+                yield futures[f], f.result()
         except BrokenProcessPool:
             raise BrokenProcessPool("a worker process ended while running (killed, out of memory, or a script "
                                     "that starts workers outside 'if __name__ == \"__main__\":')") from None
