@@ -308,7 +308,10 @@ class Exploration:
             # the configurations with the most targets first, so no worker is left with a long one at the
             # end of the iteration (the results are put back in order: same result as 1 worker)
             order.sort(key=lambda i: -len(tasks[i][1]))
-        answers = [None] * len(tasks)
+        # fewer configurations than workers (the first iteration has one): their targets are shared out, each
+        # target's answer depending only on its configuration
+        pieces = max(1, executor.workers // max(1, len(tasks)))
+        answers = [[] for _ in tasks]
         kept, sent = {}, []
 
         def jobs():
@@ -317,16 +320,20 @@ class Exploration:
                 kept[i] = self.prefilter(cfg, [tg for _, tg in todo])
                 targets = [tg for (_, tg), k in zip(todo, kept[i]) if k]
                 if not targets:
-                    answers[i] = []
                     continue
-                sent.append(i)
-                yield (cfg.q, cfg.u, cfg.A, cfg.S, cfg.Q, targets, self.eta(cfg), self.bsettings, cfg.Q_age)
+                for part in np.array_split(np.arange(len(targets)), min(pieces, len(targets))):
+                    sent.append((i, int(part[0])))
+                    yield (cfg.q, cfg.u, cfg.A, cfg.S, cfg.Q, [targets[m] for m in part], self.eta(cfg),
+                           self.bsettings, cfg.Q_age)
 
+        parts = {}
         for k, out in executor.map_unordered(_expand, self.problem, jobs()):
-            answers[sent[k]] = out
+            parts[sent[k]] = out
             if executor.workers == 1:
                 ctrl_c.check()
         ctrl_c.check()
+        for (i, _), out in sorted(parts.items()):
+            answers[i] += out
         for i, out in enumerate(answers):  # the prefiltered targets' places
             it = iter(out)
             answers[i] = [next(it) if k else _PREFILTERED for k in kept[i]]
