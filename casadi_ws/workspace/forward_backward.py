@@ -133,7 +133,7 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0):
     curvature Q (reduced backward: the second-order predictor of its own targets), unless it takes this
     configuration's Q, of age ``Q_age`` (``BackwardSettings.curvature_age``). They travel with the
     configuration, so expanding it needs no LU, in this process or in a worker, and the result does not
-    depend on the number of workers.
+    depend on the number of workers. An answer that takes this configuration's Q answers None for it.
     """
     out = []
     sens = (A, S) if Q is None else (A, S, Q)
@@ -151,8 +151,8 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0):
                 n_fac += 1
             violations = admissibility(model, res.q, res.u, fac).mask
             A_new, S_new, Q_new, G = _derivatives(model, res.q, res.u, fac, scale, bsettings, curved=not passed_on)
-            if passed_on:
-                Q_new, age = Q, Q_age + 1
+            if passed_on:  # the caller has it: not sent back (~0.1 MB an answer on the 4-cable trunk)
+                Q_new, age = None, Q_age + 1
             maps = point_maps(model, res.q, res.u, A_new, fac, G)
         out.append((res.q, res.u, res.tip, res.status, res.ok, A_new, S_new, Q_new, age, res.equilibrium_solves,
                     n_fac, violations, maps))
@@ -374,7 +374,7 @@ class Exploration:
                         self.counters["explored"] += 1
                     if not on_target:
                         self.counters["adopted"] += 1
-                    new = _Config(cell, tip, q, u, A, S, Q, age, viol, maps)
+                    new = _Config(cell, tip, q, u, A, S, cfg.Q if age else Q, age, viol, maps)
                     self._seed(new)
                     new_frontier.append(new)
                     self.reached.append(new)
