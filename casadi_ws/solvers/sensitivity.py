@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["TangentProducts", "bounded_step", "closest_to_box", "curvature", "input_range", "limited_step",
-           "second_order", "sensitivity", "tip_compliance"]
+__all__ = ["TangentProducts", "bounded_step", "closest_to_box", "curvature", "distance_below", "input_range",
+           "limited_step", "second_order", "sensitivity", "tip_compliance"]
 
 
 def sensitivity(model, q, fac, K=None, compliance: bool = False) -> tuple:
@@ -264,6 +264,20 @@ def bounded_step(A: np.ndarray, r: np.ndarray, lo: np.ndarray, hi: np.ndarray) -
             return x
         free[k] = True
     return x
+
+
+def distance_below(A: np.ndarray, r: np.ndarray, lo: np.ndarray, hi: np.ndarray, y: np.ndarray) -> float:
+    """A lower bound on the Euclidean distance from r to the set {A du : lo <= du <= hi}: the distance from r
+    to the plane normal to y that has the whole set on its other side (nan where it is unbounded along y).
+    With y = r - A du at :func:`bounded_step`'s answer it is that distance, to rounding; with any other y it
+    is still a bound, so a caller can rely on it whether or not the active-set loop converged."""
+    norm = float(np.linalg.norm(y))
+    if norm == 0.0:
+        return 0.0
+    g = np.asarray(A, dtype=float).T @ y
+    with np.errstate(invalid="ignore"):
+        support = float(np.sum(np.where(g > 0, g * hi, g * lo)))  # max of y . A du over the box
+    return (float(y @ r) - support) / norm
 
 
 def closest_to_box(A: np.ndarray, r: np.ndarray, lo: np.ndarray, hi: np.ndarray, half_width: float):
