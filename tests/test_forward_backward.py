@@ -14,7 +14,8 @@ from casadi_ws.solvers.equilibrium import Factorization, factorize
 from casadi_ws.workspace.forward import ForwardSettings, forward
 from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
 from casadi_ws.solvers.equilibrium import tangent_factorization
-from casadi_ws.solvers.sensitivity import TangentProducts, bounded_step, curvature, second_order, sensitivity
+from casadi_ws.solvers.sensitivity import (TangentProducts, bounded_step, closest_to_box, curvature, distance_below,
+                                          second_order, sensitivity)
 from casadi_ws.workspace.interval import NEIGHBOURS, Grid, interval_box, neighbourhood
 
 
@@ -203,6 +204,24 @@ def test_bounded_step_matches_scipy_bvls(rng):
         assert np.all(du >= lo) and np.all(du <= hi)
         ref = np.clip(lsq_linear(A, r, bounds=(lo, np.maximum(hi, lo + 1e-300)), method="bvls").x, lo, hi)
         assert np.linalg.norm(A @ du - r) <= np.linalg.norm(A @ ref - r) + 1e-12 * np.linalg.norm(r)
+
+
+def test_distance_below_bounds_the_prefilter_gap(rng):
+    """The prefilter's shortcut: distance_below is a lower bound on the distance to the linearised set for any
+    normal, equal to it at bounded_step's residual, and so (/ sqrt 3, less the half cell) on closest_to_box's
+    gap, which the shortcut then need not compute."""
+    for _ in range(300):
+        n = int(rng.integers(1, 6))
+        A = rng.normal(size=(3, n)) * 6e-4
+        r = rng.normal(size=3) * rng.choice([1e-3, 1e-2, 1e-1])
+        lo, hi = -rng.uniform(0, 50, n), rng.uniform(0, 50, n)
+        e = A @ bounded_step(A, r, lo, hi) - r
+        d = np.linalg.norm(e)
+        if d > 1e-6 * np.linalg.norm(r):  # outside the set (inside it, e is rounding and points anywhere)
+            assert abs(distance_below(A, r, lo, hi, -e) - d) <= 1e-9 * np.linalg.norm(r)
+        assert distance_below(A, r, lo, hi, rng.normal(size=3)) <= d + 1e-12
+        h = rng.uniform(0.1, 2) * 1e-3
+        assert closest_to_box(A, r, lo, hi, h)[1] >= d / np.sqrt(3) - h - 1e-12
 
 
 def test_neighbourhood_is_the_ring_filtered_by_the_box():
