@@ -249,7 +249,10 @@ class Exploration:
         if self.settings.cells_meeting_box:
             lower, upper = lower - 0.5 * eta, upper + 0.5 * eta
         targets, offsets = neighbourhood(centre, eta, lower, upper)
-        cells = [tuple(np.asarray(cfg.cell) + off) if self.uniform else (0, 0, 0) for off in offsets]
+        if self.uniform:
+            cells = list(map(tuple, (np.asarray(cfg.cell) + offsets).tolist()))  # Python ints, as Grid.index's
+        else:
+            cells = [(0, 0, 0)] * len(offsets)
         self.timings["step2_neighbourhood"] += time.perf_counter() - t
         return list(zip(cells, targets))
 
