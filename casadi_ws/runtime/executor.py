@@ -277,6 +277,12 @@ class ProcessExecutor(Executor):
 
     def close(self) -> None:
         self._starter.join()
+        if getattr(self._pool, "_broken", False):
+            # a worker died: the pool signals the workers it knew of then, and waits for all of them; one it
+            # spawned meanwhile (a submission racing with the break) would keep it waiting forever (seen once,
+            # a benchmark hung at start with one idle worker left)
+            for p in list((getattr(self._pool, "_processes", None) or {}).values()):
+                p.kill()
         self._pool.shutdown(cancel_futures=True)
         if self._blob_file is not None:
             _remove(self._blob_file)
