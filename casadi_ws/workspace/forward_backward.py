@@ -125,7 +125,7 @@ def algorithm1(ex: Exploration, executor: Executor, ctrl_c) -> None:
         ex.end_iteration()
 
 
-def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0):
+def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0, grid=None, reached=frozenset()):
     """Step 3 for one configuration: backward solves of its targets; returns plain data per target.
 
     The sensitivities of each new configuration come from the backward's last Newton LU (at the
@@ -135,6 +135,10 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0):
     configuration's Q, of age ``Q_age`` (``BackwardSettings.curvature_age``). They travel with the
     configuration, so expanding it needs no LU, in this process or in a worker, and the result does not
     depend on the number of workers. An answer that takes this configuration's Q answers None for it.
+
+    An answer that misses its target's cell and lands in one of ``reached`` (cells of ``grid`` reached in an
+    earlier iteration, around this configuration's) gets no sensitivities and no maps: Step 4 keeps only its
+    tip, status and admissibility (on the 4-cable trunk 59 of 2793 answers).
     """
     out = []
     sens = (A, S) if Q is None else (A, S, Q)
@@ -151,6 +155,10 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0):
                 fac = tangent_factorization(model, res.q, res.u)
                 n_fac += 1
             violations = admissibility(model, res.q, res.u, fac).mask
+            if grid is not None and not _on_target(res.tip, target, scale) and grid.index(res.tip) in reached:
+                out.append((res.q, res.u, res.tip, res.status, res.ok, None, None, None, 0, res.equilibrium_solves,
+                            n_fac, violations, None))
+                continue
             A_new, S_new, Q_new, G = _derivatives(model, res.q, res.u, fac, scale, bsettings, curved=not passed_on)
             if passed_on:  # the caller has it: not sent back (~0.1 MB an answer on the 4-cable trunk)
                 Q_new, age = None, Q_age + 1
@@ -158,6 +166,14 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0):
         out.append((res.q, res.u, res.tip, res.status, res.ok, A_new, S_new, Q_new, age, res.equilibrium_solves,
                     n_fac, violations, maps))
     return out
+
+
+_TWO_RINGS = np.array([(i, j, k) for i in range(-2, 3) for j in range(-2, 3) for k in range(-2, 3)], dtype=np.int64)
+
+
+def _on_target(tip, target, eta) -> bool:
+    """Whether a verified tip lies in its target's cell (Step 4's test, with a relative slack of 1e-9)."""
+    return bool(np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9)))
 
 
 _PREFILTERED = (None, None, None, int(Status.PREFILTERED), False, None, None, None, 0, 0, 0, 0, None)
@@ -335,7 +351,7 @@ class Exploration:
                 for part in np.array_split(np.arange(len(targets)), min(pieces, len(targets))):
                     sent.append((i, int(part[0])))
                     yield (cfg.q, cfg.u, cfg.A, cfg.S, cfg.Q, [targets[m] for m in part], self.eta(cfg),
-                           self.bsettings, cfg.Q_age)
+                           self.bsettings, cfg.Q_age, *self._reached_near(cfg))
 
         parts = {}
         for k, out in executor.map_unordered(_expand, self.problem, jobs()):
@@ -350,6 +366,14 @@ class Exploration:
             answers[i] = [next(it) if k else _PREFILTERED for k in kept[i]]
         self.timings["step3_backward"] += time.perf_counter() - t
         return answers
+
+    def _reached_near(self, cfg) -> tuple:
+        """(grid, the cells reached so far within two cells of cfg's): where an answer that misses its target
+        lands, in the cell next to it or one further, when its sensitivities are not needed (see _expand)."""
+        if not self.uniform:
+            return None, frozenset()
+        near = map(tuple, (np.asarray(cfg.cell) + _TWO_RINGS).tolist())
+        return self.grid, frozenset(c for c in near if c in self.reached_cells)
 
     def update(self, tasks, answers) -> list:
         """Step 4: returns the new frontier. A cell is reached when a verified answer lies in it, whichever
@@ -372,7 +396,7 @@ class Exploration:
                     self._exclude(tip, u, viol)
                     self._fail(target, Status.INADMISSIBLE, tip)
                     continue
-                on_target = ok and np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9))
+                on_target = ok and _on_target(tip, target, eta)
                 hit = on_target
                 if not hit:
                     self._fail(target, Status(status) if not ok else Status.NOT_REACHED, tip if ok else None)
