@@ -478,6 +478,24 @@ def test_fb_result_does_not_depend_on_the_number_of_workers():
     assert np.abs(one.points - two.points).max() < 1e-12
 
 
+def test_answers_landing_in_reached_cells_skip_only_what_step_4_throws_away(monkeypatch):
+    """Their sensitivities, Q and maps are not computed (see _expand): the run is the same without the skip."""
+    import importlib
+
+    fbm = importlib.import_module("casadi_ws.workspace.forward_backward")  # (the package's name is the function)
+    pb = small_trunk("corotational", n_cables=4)  # two answers land in reached cells (3 cables at 6 mm: none)
+    calls, derivatives = [], fbm._derivatives
+    monkeypatch.setattr(fbm, "_derivatives", lambda *a, **k: calls.append(1) or derivatives(*a, **k))
+    skip = forward_backward(pb, FBSettings(step=0.008, progress=False))
+    with_skip = len(calls)
+    monkeypatch.setattr(fbm.Exploration, "_reached_near", lambda self, cfg: (None, frozenset()))
+    full = forward_backward(pb, FBSettings(step=0.008, progress=False))
+    assert len(calls) - with_skip > with_skip and skip.counters == full.counters  # fewer, nothing else changed
+    np.testing.assert_array_equal(skip.arrays["cells"], full.arrays["cells"])
+    np.testing.assert_array_equal(skip.points, full.points)
+    np.testing.assert_array_equal(skip.failed_u, full.failed_u)
+
+
 def test_relative_strategy_explores_with_steps_relative_to_the_distance():
     pb = small_trunk("corotational", n_cables=2)
     model = StaticModel(pb)
