@@ -268,9 +268,10 @@ def bounded_step(A: np.ndarray, r: np.ndarray, lo: np.ndarray, hi: np.ndarray) -
 
 def distance_below(A: np.ndarray, r: np.ndarray, lo: np.ndarray, hi: np.ndarray, y: np.ndarray) -> float:
     """A lower bound on the Euclidean distance from r to the set {A du : lo <= du <= hi}: the distance from r
-    to the plane normal to y that has the whole set on its other side (nan where it is unbounded along y).
-    With y = r - A du at :func:`bounded_step`'s answer it is that distance, to rounding; with any other y it
-    is still a bound, so a caller can rely on it whether or not the active-set loop converged."""
+    to the plane normal to y that has the whole set on its other side (-inf or nan, no bound, where the set is
+    unbounded along y). With y = r - A du at :func:`bounded_step`'s answer it is that distance, to rounding;
+    with any other y it is still a bound, so a caller can rely on it whether or not the active-set loop
+    converged."""
     norm = float(np.linalg.norm(y))
     if norm == 0.0:
         return 0.0
