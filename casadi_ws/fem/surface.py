@@ -13,7 +13,7 @@ import numpy as np
 
 from .elements import TET10_EDGES
 
-__all__ = ["boundary_faces", "components", "edge_report", "reverse", "winding_number"]
+__all__ = ["boundary_faces", "components", "edge_report", "reverse", "winding_number", "winding_numbers"]
 
 # faces of a positively oriented tetrahedron, normals outwards
 _FACES = ((0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2))
@@ -84,10 +84,15 @@ def edge_report(faces: np.ndarray) -> tuple[int, int]:
 def winding_number(X: np.ndarray, faces: np.ndarray, p: np.ndarray) -> float:
     """Winding number of the closed surface (flat corner triangles) around p: 1 inside a surface whose
     normals point outwards, 0 outside (van Oosterom and Strackee's solid angle)."""
-    tri = X[np.asarray(faces)[:, :3]] - np.asarray(p, dtype=float)
-    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-    la, lb, lc = (np.linalg.norm(v, axis=1) for v in (a, b, c))
-    num = np.einsum("ij,ij->i", a, np.cross(b, c))
-    den = la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", b, c) * la \
-        + np.einsum("ij,ij->i", c, a) * lb
-    return float(np.sum(2 * np.arctan2(num, den)) / (4 * np.pi))
+    return float(winding_numbers(X, faces, np.asarray(p, dtype=float)[None])[0])
+
+
+def winding_numbers(X: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """:func:`winding_number` around each of ``points`` (k, 3), at once."""
+    tri = X[np.asarray(faces)[:, :3]][None] - np.asarray(points, dtype=float)[:, None, None]  # (k, faces, 3, 3)
+    a, b, c = tri[:, :, 0], tri[:, :, 1], tri[:, :, 2]
+    la, lb, lc = (np.linalg.norm(v, axis=-1) for v in (a, b, c))
+    num = np.einsum("kij,kij->ki", a, np.cross(b, c))
+    den = la * lb * lc + np.einsum("kij,kij->ki", a, b) * lc + np.einsum("kij,kij->ki", b, c) * la \
+        + np.einsum("kij,kij->ki", c, a) * lb
+    return np.sum(2 * np.arctan2(num, den), axis=1) / (4 * np.pi)
