@@ -87,7 +87,12 @@ def test_kernels_evaluated_lanes_at_a_time_give_the_scalar_numbers_to_the_bit(mo
             assert np.array_equal(a, b)
     slot = np.ascontiguousarray(m._k_slot.reshape(m.mesh.n_tets, -1)[:n], dtype=np.int32)
     scalar = ElementBatch(g.stiff.fun, "c", vector=False)
-    assert np.array_equal(g.stiff.scatter(slot, m._k_nnz + 1, *args), scalar.scatter(slot, m._k_nnz + 1, *args))
+    summed = g.stiff.scatter(slot, m._k_nnz + 1, *args)
+    assert np.array_equal(summed, scalar.scatter(slot, m._k_nnz + 1, *args))
+    # the nodal values read by the kernels where they are (``gather``), in both drivers: the same sums
+    edofs = np.ascontiguousarray(g.edofs[:n], dtype=np.int32)
+    for kernel in (g.stiff, scalar):
+        assert np.array_equal(kernel.scatter(slot, m._k_nnz + 1, q, *args[1:], gather=edofs), summed)
 
 
 @pytest.mark.parametrize("kernel, params", [

@@ -484,7 +484,9 @@ class StaticModel:
             g = self.element_groups[0]
             if "_f_slot32" not in self.__dict__:
                 self._f_slot32 = np.ascontiguousarray(self._edofs.ravel(), dtype=np.int32)
-            out = g.force.scatter(self._f_slot32, self.n_dof, q[g.edofs], g.Xe, g.Ge, g.Pe, sumsq=norm)
+            # (the slots of the element forces are their dofs: the same array says where to read q)
+            out = g.force.scatter(self._f_slot32, self.n_dof, q, g.Xe, g.Ge, g.Pe, sumsq=norm,
+                                  gather=self._f_slot32.reshape(g.edofs.shape))
             return (out[0], float(np.sqrt(out[1]))) if norm else out
         fe, = self._element_values(q, "force")
         f = np.bincount(self._edofs.ravel(), weights=fe.ravel(), minlength=self.n_dof)
@@ -503,9 +505,10 @@ class StaticModel:
             self._k_slot32 = [np.ascontiguousarray(
                 (self._k_slot.reshape(m, -1) if g.index is None else self._k_slot.reshape(m, -1)[g.index]).ravel(),
                 dtype=np.int32) for g in self.element_groups]
+            self._edofs32 = [np.ascontiguousarray(g.edofs, dtype=np.int32) for g in self.element_groups]
         data = None
-        for g, slot in zip(self.element_groups, self._k_slot32):
-            part = g.stiff.scatter(slot, self._k_nnz + 1, q[g.edofs], g.Xe, g.Ge, g.Pe)
+        for g, slot, edofs in zip(self.element_groups, self._k_slot32, self._edofs32):
+            part = g.stiff.scatter(slot, self._k_nnz + 1, q, g.Xe, g.Ge, g.Pe, gather=edofs)
             data = part if data is None else data + part
         return data
 
