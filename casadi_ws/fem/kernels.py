@@ -365,15 +365,14 @@ class ElementBatch:
         slots are read. The sums are taken in the same order, so the numbers are the bincount's to the bit;
         a batch that runs on threads, or without a compiler, is computed whole and summed by bincount.
         """
-        if gather is not None and (self._lib is None or gather.dtype != np.int32 or not gather.flags.c_contiguous
-                                   or inputs[0].dtype != float or not inputs[0].flags.c_contiguous):
-            inputs, gather = (inputs[0][gather], *inputs[1:]), None
         m = len(gather) if gather is not None else max(a.shape[0] for a in inputs if np.ndim(a) == 2)
         n = self.n_out[0]
-        if self._lib is None or self.fun.n_out() != 1 or (
-                m * n >= PARALLEL_OUTPUT and kernel_threads() > 1):
-            if gather is not None:
-                inputs = (inputs[0][gather], *inputs[1:])
+        direct = self._lib is not None and self.fun.n_out() == 1 and not (
+            m * n >= PARALLEL_OUTPUT and kernel_threads() > 1)
+        if gather is not None and not (direct and gather.dtype == np.int32 and gather.flags.c_contiguous
+                                       and inputs[0].dtype == float and inputs[0].flags.c_contiguous):
+            inputs, gather = (np.asarray(inputs[0])[gather], *inputs[1:]), None  # numpy's copy instead
+        if not direct:
             out, = self(*inputs)
             data = np.bincount(slot, weights=out.ravel(), minlength=size)
             return (data, float(np.dot(out.ravel(), out.ravel()))) if sumsq else data
