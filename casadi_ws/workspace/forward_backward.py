@@ -46,7 +46,7 @@ from .interval import Grid, default_step, interval_box, neighbourhood
 from .maps import point_maps, stack
 from .result import WorkspaceResult, describe
 
-__all__ = ["Exploration", "FBSettings", "algorithm1", "forward_backward"]
+__all__ = ["Exploration", "FBSettings", "algorithm1", "forward_backward", "prefilter"]
 
 
 @dataclass
@@ -125,8 +125,14 @@ def algorithm1(ex: Exploration, executor: Executor, ctrl_c) -> None:
         ex.end_iteration()
 
 
-def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0, grid=None, reached=frozenset()):
+def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0, grid=None, reached=frozenset(), p=None,
+            threshold=None):
     """Step 3 for one configuration: backward solves of its targets; returns plain data per target.
+
+    With the configuration's tip ``p`` and a ``threshold``, the targets are first put to the prefilter
+    (:func:`prefilter`); a dropped target answers :data:`_PREFILTERED`. It runs here, in the worker, rather
+    than in the process handing out the jobs: there, its 2 s on the 4-cable trunk held the lock the pool's
+    threads need to feed the workers, and the run took 3-6 s longer (docs/methods.md).
 
     The sensitivities of each new configuration come from the backward's last Newton LU (at the
     second-order predictor, one iterate from the answer), refined with the exact tangent at the answer
@@ -143,7 +149,13 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0, grid=None,
     out = []
     sens = (A, S) if Q is None else (A, S, Q)
     passed_on = Q is not None and Q_age < _curvature_age(model, bsettings)
-    for target in targets:
+    kept = [True] * len(targets)
+    if p is not None:
+        kept = prefilter(model, q, u, A, p, targets, scale, threshold, bsettings.edge_box is not None)
+    for target, keep in zip(targets, kept):
+        if not keep:
+            out.append(_PREFILTERED)
+            continue
         res = backward(model, target, q, u, None, scale, bsettings, sens=sens)
         A_new = S_new = Q_new = maps = None
         age = 0
@@ -178,6 +190,35 @@ def _on_target(tip, target, eta) -> bool:
 
 _PREFILTERED = (None, None, None, int(Status.PREFILTERED), False, None, None, None, 0, 0, 0, 0, None)
 """A target the prefilter dropped, as :func:`_expand` answers for a target it solved."""
+
+
+def prefilter(model, q, u, A, p, targets, eta, threshold, whole_cell=True) -> list[bool]:
+    """Whether each target of the configuration (q, u), of tip p and Step 1's A, is kept by the prefilter
+    (``FBSettings.prefilter``: ``threshold``, in steps eta). ``whole_cell``: a target is kept when the
+    linearised reachable set comes near any point of its cell, not only its centre (the backward problem's
+    ``edge_box`` lets an answer land off the centre)."""
+    if threshold is None or (model.has_contact and model.min_gap(q) < eta):
+        # near a contact the linearisation cannot tell which cells are out of reach: it holds the
+        # contacts that releasing an input would open, and misses those a step would close (the tip then
+        # slides along the obstacle or the body)
+        return [True] * len(targets)
+    lo, hi, _ = input_range(model, q, u)
+    return [_linear_gap(A, target - p, lo, hi, eta, threshold, whole_cell) <= threshold * eta for target in targets]
+
+
+def _linear_gap(A, r, lo, hi, eta, threshold, whole_cell) -> float:
+    """Infinity-norm distance from the cell of centre p + r to the linearised reachable set {A du, du in
+    [lo, hi]}."""
+    e = A @ bounded_step(A, r, lo, hi) - r
+    gap = np.abs(e).max() - 0.5 * eta
+    if gap > 0 and whole_cell:  # the centre is out of reach: any point of the cell?
+        # no point of the cell is nearer than the linearised set's distance to r in the infinity norm (at
+        # least the Euclidean one / sqrt 3), less the half cell: where that bound already drops the target
+        # (two thirds of these on the 4-cable trunk), closest_to_box could not keep it
+        far = distance_below(A, r, lo, hi, -e) / np.sqrt(r.size) - 0.5 * eta
+        if not far > (threshold + 1e-9) * eta:
+            gap = min(gap, closest_to_box(A, r, lo, hi, 0.5 * eta)[1])
+    return gap
 
 
 def _derivatives(model, q, u, fac, eta, bsettings, curved: bool = True):
@@ -274,7 +315,7 @@ class Exploration:
 
     def exclude(self, cfg, candidates) -> list[tuple[tuple, np.ndarray]]:
         """Rule (10): drop the points explored before (and claim the others), and the cells inside an
-        obstacle. (The prefilter is applied as Step 3 hands out its jobs: :meth:`backward`.)"""
+        obstacle. (The prefilter is applied by Step 3's jobs: :func:`_expand`.)"""
         t = time.perf_counter()
         eta = self.eta(cfg)
         todo = []
@@ -298,37 +339,9 @@ class Exploration:
         self.timings["step2_neighbourhood"] += time.perf_counter() - t
         return todo
 
-    def prefilter(self, cfg, targets) -> list[bool]:
-        """Whether each target of cfg is kept by the prefilter (``FBSettings.prefilter``)."""
-        eta, threshold = self.eta(cfg), self.settings.prefilter
-        if threshold is None or (self.model.has_contact and self.model.min_gap(cfg.q) < eta):
-            # near a contact the linearisation cannot tell which cells are out of reach: it holds the
-            # contacts that releasing an input would open, and misses those a step would close (the tip then
-            # slides along the obstacle or the body)
-            return [True] * len(targets)
-        return [self._linear_gap(cfg, tg, eta) <= threshold * eta for tg in targets]
-
-    def _linear_gap(self, cfg, target, eta) -> float:
-        """Infinity-norm distance from the target's cell to the linearised reachable set at cfg."""
-        lo, hi, _ = input_range(self.model, cfg.q, cfg.u)
-        r = target - cfg.p
-        e = cfg.A @ bounded_step(cfg.A, r, lo, hi) - r
-        gap = np.abs(e).max() - 0.5 * eta
-        if gap > 0 and self.bsettings.edge_box is not None:  # the centre is out of reach: any point of the cell?
-            # no point of the cell is nearer than the linearised set's distance to r in the infinity norm (at
-            # least the Euclidean one / sqrt 3), less the half cell: where that bound already drops the target
-            # (two thirds of these on the 4-cable trunk), closest_to_box could not keep it
-            far = distance_below(cfg.A, r, lo, hi, -e) / np.sqrt(r.size) - 0.5 * eta
-            if not far > (self.settings.prefilter + 1e-9) * eta:
-                gap = min(gap, closest_to_box(cfg.A, r, lo, hi, 0.5 * eta)[1])
-        return gap
-
     def backward(self, tasks, executor: Executor, ctrl_c) -> list:
         """Step 3: the backward solves of every task, warm-started from its configuration, in task order.
-
-        The prefilter is applied to a task's targets as its job is handed out, so the workers solve the
-        first jobs while this process filters the next (filtered before any job, it held them idle: 2.6 s
-        of the 4-cable trunk's 54 s). Its answers do not depend on when it runs."""
+        Each job first puts its targets to the prefilter (in the worker: see :func:`_expand`)."""
         t = time.perf_counter()
         order = list(range(len(tasks)))
         if executor.workers > 1:
@@ -338,20 +351,16 @@ class Exploration:
         # fewer configurations than workers (the first iteration has one): their targets are shared out, each
         # target's answer depending only on its configuration
         pieces = max(1, executor.workers // max(1, len(tasks)))
-        answers = [[] for _ in tasks]
-        kept, sent = {}, []
+        sent = []
 
         def jobs():
             for i in order:
                 cfg, todo = tasks[i]
-                kept[i] = self.prefilter(cfg, [tg for _, tg in todo])
-                targets = [tg for (_, tg), k in zip(todo, kept[i]) if k]
-                if not targets:
-                    continue
+                targets = [tg for _, tg in todo]
                 for part in np.array_split(np.arange(len(targets)), min(pieces, len(targets))):
                     sent.append((i, int(part[0])))
                     yield (cfg.q, cfg.u, cfg.A, cfg.S, cfg.Q, [targets[m] for m in part], self.eta(cfg),
-                           self.bsettings, cfg.Q_age, *self._reached_near(cfg))
+                           self.bsettings, cfg.Q_age, *self._reached_near(cfg), cfg.p, self.settings.prefilter)
 
         parts = {}
         for k, out in executor.map_unordered(_expand, self.problem, jobs()):
@@ -359,11 +368,9 @@ class Exploration:
             if executor.workers == 1:
                 ctrl_c.check()
         ctrl_c.check()
+        answers = [[] for _ in tasks]
         for (i, _), out in sorted(parts.items()):
             answers[i] += out
-        for i, out in enumerate(answers):  # the prefiltered targets' places
-            it = iter(out)
-            answers[i] = [next(it) if k else _PREFILTERED for k in kept[i]]
         self.timings["step3_backward"] += time.perf_counter() - t
         return answers
 
