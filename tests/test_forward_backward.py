@@ -12,7 +12,7 @@ from casadi_ws.workspace.backward import BackwardSettings, backward
 from casadi_ws.workspace.compare import compare
 from casadi_ws.solvers.equilibrium import Factorization, factorize
 from casadi_ws.workspace.forward import ForwardSettings, forward
-from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
+from casadi_ws.workspace.forward_backward import FBSettings, forward_backward, prefilter
 from casadi_ws.solvers.equilibrium import tangent_factorization
 from casadi_ws.solvers.sensitivity import (TangentProducts, bounded_step, closest_to_box, curvature, distance_below,
                                           second_order, sensitivity)
@@ -222,6 +222,30 @@ def test_distance_below_bounds_the_prefilter_gap(rng):
         assert distance_below(A, r, lo, hi, rng.normal(size=3)) <= d + 1e-12
         h = rng.uniform(0.1, 2) * 1e-3
         assert closest_to_box(A, r, lo, hi, h)[1] >= d / np.sqrt(3) - h - 1e-12
+
+
+def test_prefilter_keeps_what_the_linearised_set_reaches_and_drops_what_it_misses():
+    """A target the linearised reachable set p + A du (du within the remaining inputs) reaches is kept, one it
+    misses by many cells is dropped, a cell whose centre it misses but whose corner it touches is kept as a
+    whole cell (the backward may land off the centre), and no threshold keeps everything."""
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    u = np.array([30.0, 30.0])
+    eq = solve_equilibrium(m, u)
+    A, _ = sensitivity(m, eq.q, tangent_factorization(m, eq.q, u))
+    eta = 0.004
+    inside = eq.tip + A @ np.array([10.0, -10.0])  # the set is a flat patch here (two inputs)
+    n = np.cross(A[:, 0], A[:, 1])
+    n /= np.linalg.norm(n)
+    far = inside + 10 * eta * n
+    # the cell's corner nearest the patch lies on it; its centre, in the infinity norm, lies
+    # 0.5 eta (|n|_1 |n|_inf - 1) beyond half a cell from it: more than the prefilter's 0.1 eta
+    assert 0.5 * (np.abs(n).sum() * np.abs(n).max() - 1) > 0.12
+    corner = inside + 0.5 * eta * np.sign(n)
+    assert prefilter(m, eq.q, u, A, eq.tip, [inside, far], eta, 0.1) == [True, False]
+    assert prefilter(m, eq.q, u, A, eq.tip, [corner], eta, 0.1, whole_cell=True) == [True]
+    assert prefilter(m, eq.q, u, A, eq.tip, [corner], eta, 0.1, whole_cell=False) == [False]
+    assert prefilter(m, eq.q, u, A, eq.tip, [inside, far, corner], eta, None) == [True] * 3
 
 
 def test_neighbourhood_is_the_ring_filtered_by_the_box():
