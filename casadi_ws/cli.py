@@ -557,11 +557,12 @@ def main(argv: list[str] | None = None) -> int:
     from .fem.model import ModelError
     from .io.problem import ProblemError
     from .io.sofa.recorder import SceneError
+    from .runtime.executor import StartMethodError
 
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ProblemError, MeshError, ModelError, UsageError, SceneError) as exc:
+    except (ProblemError, MeshError, ModelError, UsageError, SceneError, StartMethodError) as exc:
         if args.debug:
             raise
         print(f"casadi-ws: error: {exc}", file=sys.stderr)

@@ -256,16 +256,28 @@ def test_a_process_pool_that_lost_a_worker_restarts():
 def test_a_script_without_the_main_guard_fails_at_once_with_the_reason(tmp_path):
     """Python's 'spawn' imports the caller's script again in every worker: without the guard each worker
     would start a pool of its own. It used to hang for ever (the parent's write of what starts a worker
-    waited on a worker that had died); now the workers refuse, the parent stops, and both say why."""
+    waited on a worker that had died); now the workers refuse, the parent stops, and both say why. Forked
+    workers (Linux's default here, :func:`casadi_ws.runtime.executor.start_method`) import nothing again,
+    and the same script runs."""
     script = tmp_path / "no_guard.py"
     script.write_text("import casadi_ws as cw\n"
                       f"p = cw.load_problem({str(REPO / 'problems' / 'trunk_2cables.yaml')!r})\n"
-                      "cw.forward_backward(p, settings=cw.FBSettings(workers=2, progress=False))\n")
+                      "r = cw.forward_backward(p, settings=cw.FBSettings(workers=2, progress=False, max_cells=30))\n"
+                      "print('cells', r.counters['feasible'])\n")
+    env = {**os.environ, "CASADI_WS_START_METHOD": "spawn"}
     t = time.perf_counter()
-    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120, cwd=tmp_path,
+                       env=env)
     assert r.returncode != 0 and time.perf_counter() - t < 60
     assert "must do so under 'if __name__ == \"__main__\":'" in r.stderr
     assert "BrokenProcessPool: a worker process ended while running" in r.stderr
+    if sys.platform.startswith("linux"):
+        env["CASADI_WS_START_METHOD"] = "fork"
+        r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120, cwd=tmp_path,
+                           env=env)
+        assert r.returncode == 0, r.stderr[-2000:]
+        assert r.stdout.startswith("cells ")
+
 
 def test_the_documented_study_file_is_valid(tmp_path):
     import re
@@ -286,3 +298,23 @@ def test_trials_flag_is_for_optuna_studies_and_positive(tmp_path):
     r = cli("study", REPO / "problems" / "study_trunk3.yaml", "--out", tmp_path / "out", "--trials", "0")
     assert r.returncode == 2 and "--trials: expected an integer >= 1, got 0" in r.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_workers_are_forked_only_where_that_is_safe(monkeypatch):
+    from casadi_ws.runtime.executor import START_METHOD_VARIABLE, StartMethodError, start_method
+
+    monkeypatch.setenv(START_METHOD_VARIABLE, "spawn")
+    assert start_method() == "spawn"
+    monkeypatch.setenv(START_METHOD_VARIABLE, "threads")
+    with pytest.raises(StartMethodError, match="expected 'fork', 'spawn' or 'auto'"):
+        start_method()
+    monkeypatch.setenv(START_METHOD_VARIABLE, "auto")
+    assert start_method() in (("fork", "spawn") if sys.platform.startswith("linux") else ("spawn",))
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:  # a lock another thread holds would stay held in a forked child
+        assert start_method() == "spawn"
+    finally:
+        stop.set()
+        other.join()

@@ -10,7 +10,8 @@ problem's fingerprint) and keeps it for the next job. IPOPT is not thread-safe u
 workers are processes with one thread each.
 
 ``SerialExecutor``   in this process, with the caller's model (no copy)
-``ProcessExecutor``  a pool of N fresh ('spawn') processes with one BLAS thread each
+``ProcessExecutor``  a pool of N processes with one BLAS thread each: forked from this one where that is safe
+                     (Linux, no other thread of Python's), else fresh ('spawn'); see :func:`start_method`
 ``DaskExecutor``     the workers of a Dask cluster: an existing one (its scheduler's address; workers on one
                      machine or many, started with ``dask worker ADDRESS --nthreads 1``) or a
                      ``distributed.LocalCluster`` of N single-threaded worker processes
@@ -30,6 +31,7 @@ import multiprocessing as mp
 import os
 import pickle
 import signal
+import sys
 import tempfile
 import threading
 import weakref
@@ -40,7 +42,7 @@ from typing import Callable, Iterator
 from .run_state import problem_fingerprint
 
 __all__ = ["DaskExecutor", "Executor", "ProcessExecutor", "SerialExecutor", "SchedulerError", "deferred_interrupt",
-           "make_executor", "model_for", "one_blas_thread", "small_pages"]
+           "make_executor", "model_for", "one_blas_thread", "small_pages", "start_method", "StartMethodError"]
 
 
 @contextlib.contextmanager
@@ -218,10 +220,11 @@ class ProcessExecutor(Executor):
     jobs of other problems carry it (pickled once per call, unpickled by a worker only to build its model).
     The workers read the problem from a temporary file, not from what starts them: Python writes that to a
     new worker through a pipe (64 KiB) before the worker reads it, and where the worker dies first (a script
-    without the ``__main__`` guard) the write never ended.
+    without the ``__main__`` guard) the write never ended. Given the ``model`` of ``problem`` as well, forked
+    workers (:func:`start_method`) start with it instead of building their own.
     """
 
-    def __init__(self, workers: int, problem=None):
+    def __init__(self, workers: int, problem=None, model=None):
         if getattr(mp.current_process(), "_inheriting", False):
             # this is a worker importing the caller's script (Python's 'spawn' runs it again in every worker):
             # without the guard the script would start pools of its own, and the pool that started this worker
@@ -238,12 +241,26 @@ class ProcessExecutor(Executor):
             with os.fdopen(fd, "wb") as f:
                 pickle.dump(problem, f, protocol=4)
             weakref.finalize(self, _remove, self._blob_file)
-        self._pool = self._start()
+        self._starter = None
+        self._pool = self._start(model)
 
-    def _start(self):
-        pool = ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"), initializer=_init_worker,
+    def _start(self, model=None):
+        method = start_method()
+        pool = ProcessPoolExecutor(self.workers, mp_context=mp.get_context(method), initializer=_init_worker,
                                    initargs=(self._key, self._blob_file))
         _large_pipes(pool)
+        if method == "fork":
+            # Python forks every worker at the pool's first submission, here, in this thread: they start at once
+            # with this process's modules and model (the caller's, when given)
+            lent = model is not None and self._key is not None and self._key not in _MODELS
+            if lent:
+                _MODELS[self._key] = model
+            try:
+                _start_workers(pool, self.workers)
+            finally:
+                if lent:
+                    _MODELS.pop(self._key, None)
+            return pool
         # a pool spawns its processes at its first submissions, each blocking the submitter until the child
         # has imported the main module (~0.4 s): asked for here, from a thread, the workers start and build
         # their models while this process builds its own and solves the first equilibrium
@@ -252,7 +269,8 @@ class ProcessExecutor(Executor):
         return pool
 
     def restart(self) -> None:
-        self._starter.join()
+        if self._starter is not None:
+            self._starter.join()
         self._pool.shutdown(wait=False, cancel_futures=True)
         self._pool = self._start()
 
@@ -276,7 +294,8 @@ class ProcessExecutor(Executor):
         return self._pool.submit(fn, *args)
 
     def close(self) -> None:
-        self._starter.join()
+        if self._starter is not None:
+            self._starter.join()
         if getattr(self._pool, "_broken", False):
             # a worker died: the pool signals the workers it knew of then, and waits for all of them; one it
             # spawned meanwhile (a submission racing with the break) would keep it waiting forever (seen once,
@@ -308,6 +327,41 @@ def _large_pipes(pool) -> None:
                 fcntl.fcntl(end.fileno(), fcntl.F_SETPIPE_SZ, PIPE_BYTES)
     except (ImportError, AttributeError, OSError):
         pass
+
+
+START_METHOD_VARIABLE = "CASADI_WS_START_METHOD"
+"""The environment variable that chooses how worker processes start: ``fork``, ``spawn`` or ``auto`` (default)."""
+
+
+class StartMethodError(ValueError):
+    """:data:`START_METHOD_VARIABLE` names no start method."""
+
+
+def start_method() -> str:
+    """How :class:`ProcessExecutor` starts its workers: ``fork`` on Linux while this process runs no other
+    Python thread (and, from Python 3.12 on, which warns about it, no other thread at all), else ``spawn``;
+    :data:`START_METHOD_VARIABLE` overrides it.
+
+    Why fork: a spawned worker imports the package again (~0.7 s) and builds its model (~0.2 s), competing for
+    the cores with this process's first solves; on the 4-cable trunk with 2 workers the first jobs started
+    1.1-1.4 s into the run, 0.5 s with forked workers, which take the caller's model as it is. Why not always:
+    a fork copies only the thread that calls it, and a lock another thread held stays held in the child
+    (macOS's system libraries are not fork-safe at all). The idle threads of OpenBLAS's pool are made safe by
+    OpenBLAS itself, which stops them around a fork."""
+    chosen = os.environ.get(START_METHOD_VARIABLE, "auto")
+    if chosen in ("fork", "spawn"):
+        return chosen
+    if chosen != "auto":
+        raise StartMethodError(f"{START_METHOD_VARIABLE}={chosen!r}: expected 'fork', 'spawn' or 'auto'")
+    alone = threading.active_count() == 1 and (sys.version_info < (3, 12) or _os_threads() == 1)
+    return "fork" if sys.platform.startswith("linux") and alone else "spawn"
+
+
+def _os_threads() -> int:
+    try:
+        return len(os.listdir("/proc/self/task"))
+    except OSError:
+        return 0
 
 
 def _ready() -> None:
@@ -434,7 +488,7 @@ class DaskExecutor(Executor):
 
 def make_executor(workers: int, model=None, problem=None) -> Executor:
     """``SerialExecutor(model)`` for one worker, else a ``ProcessExecutor`` (set up for ``problem``)."""
-    return SerialExecutor(model) if int(workers) <= 1 else ProcessExecutor(workers, problem)
+    return SerialExecutor(model) if int(workers) <= 1 else ProcessExecutor(workers, problem, model)
 
 
 class _Deferred:
