@@ -311,3 +311,22 @@ def test_a_forward_grid_gives_the_surface_without_a_solve(trunk3):
     assert b.counters == {"solved_nodes": 0, "known_nodes": 98, "seeded_nodes": 0, "factorizations": 0}
     assert b.closed and b.checks["points_outside"] == 0
     assert b.volume == pytest.approx(boundary(trunk3, BoundarySettings(n=5)).volume, rel=1e-9)
+
+
+def test_only_the_face_nodes_another_starts_from_get_their_sensitivities():
+    """_solve_nodes starts each node from the nearest of the seeds and the nodes before it (the first of
+    equals); _starts_of_others names the nodes so chosen, which alone need S."""
+    from casadi_ws.workspace.boundary import _starts_of_others
+
+    rng = np.random.default_rng(3)
+    span = np.array([100.0, 100.0, 150.0, 150.0])
+    for trial in range(20):
+        us = rng.integers(0, 5, size=(30, 4)) * span / 4
+        seeds = [(rng.integers(0, 9, size=4) * span / 8, None, None, None) for _ in range(rng.integers(0, 12))]
+        chosen, done = set(), list(seeds)
+        for k, u in enumerate(us):
+            if done:
+                near = min(done, key=lambda d: np.abs((d[0] - u) / span).max())
+                chosen |= {j for j in range(k) if near is done[len(seeds) + j]}
+            done.append((u, None, None, None))
+        assert _starts_of_others(us, seeds, span) == chosen
