@@ -124,12 +124,30 @@ class Boundary:
 
 
 def distance_outside(b: Boundary, points) -> np.ndarray:
-    """Signed distance of each point to a closed, outward-oriented surface (> 0 outside), m."""
-    import pyvista as pv
+    """Signed distance of each point to a closed, outward-oriented surface (> 0 outside), m.
 
-    surf = pv.PolyData(b.vertices, np.hstack([np.full((len(b.triangles), 1), 3), b.triangles]).ravel())
-    out = pv.PolyData(np.asarray(points, float)).compute_implicit_distance(surf)
-    return np.asarray(out.point_data["implicit_distance"], float)
+    VTK's implicit distance, called through VTK's own modules rather than pyvista (which calls the same): their
+    import takes ~0.1 s against pyvista's ~0.25 s, at the end of every run, with the workers idle."""
+    from vtkmodules.util.numpy_support import VTK_ID_TYPE, get_numpy_array_type, numpy_to_vtk, vtk_to_numpy
+    from vtkmodules.vtkCommonCore import vtkDoubleArray, vtkPoints
+    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
+    from vtkmodules.vtkFiltersCore import vtkImplicitPolyDataDistance
+
+    def ids(a):
+        return numpy_to_vtk(np.ascontiguousarray(a, dtype=get_numpy_array_type(VTK_ID_TYPE)), True, VTK_ID_TYPE)
+
+    vertices = vtkPoints()
+    vertices.SetData(numpy_to_vtk(np.ascontiguousarray(b.vertices, dtype=float), deep=True))
+    triangles = vtkCellArray()
+    triangles.SetData(ids(np.arange(0, 3 * len(b.triangles) + 1, 3)), ids(np.ravel(b.triangles)))
+    surface = vtkPolyData()
+    surface.SetPoints(vertices)
+    surface.SetPolys(triangles)
+    distance = vtkImplicitPolyDataDistance()
+    distance.SetInput(surface)
+    out = vtkDoubleArray()
+    distance.FunctionValue(numpy_to_vtk(np.ascontiguousarray(points, dtype=float), deep=True), out)
+    return np.array(vtk_to_numpy(out), dtype=float)
 
 
 def two_faces(n_u: int):
