@@ -29,6 +29,10 @@ def test_tangent_matches_central_differences(model, order, rng):
     q = m.full(rng.normal(size=m.n_free) * 2e-4)
     u = np.array([30.0, 55.0])
     R, K, dRdu = m.residual_and_tangent(q, u)
+    # K alone (without the internal forces' kernel pass) is the same matrix, to the bit
+    K_alone = m.tangent(q, u)
+    assert np.array_equal(K_alone.indptr, K.indptr) and np.array_equal(K_alone.indices, K.indices)
+    assert np.array_equal(K_alone.data, K.data)
     for _ in range(2):
         v = rng.normal(size=m.n_free)
         h = 1e-7

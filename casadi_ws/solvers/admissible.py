@@ -207,14 +207,14 @@ def _stability(model, q, u, fac, K):
     if n_neg is None and not held and not expected:
         # Newton's LU of an unsymmetric K (PARDISO's) has no inertia: a positive definite symmetric part
         # proves every eigenvalue's real part positive
-        Ks = fac.K if fac.K is not None else (K if K is not None else model.residual_and_tangent(q, u)[1])
+        Ks = fac.K if fac.K is not None else (K if K is not None else model.tangent(q, u))
         if symmetric_part_positive_definite(Ks):
             return True, 0, None, None
     if n_neg is None and expected:
         # Newton's LU swapped rows; the saddle point of an energy is quasi-definite where it is stable (its
         # stiffness block positive definite, the pressure block negative), and such a matrix has an L D L^T
         # in any order: factorised with diagonal pivots, its pivots are its inertia
-        fac = Factorization(factorize(model.residual_and_tangent(q, u)[1], pivot_threshold=0.0, solver=solver),
+        fac = Factorization(factorize(model.tangent(q, u), pivot_threshold=0.0, solver=solver),
                             q.copy())
         n_neg = fac.negative_pivots()
     if n_neg == expected:
@@ -254,7 +254,7 @@ def smallest_eigenvalues(model, q, u, K=None, k: int = 6):
     from .linear import solver_of
 
     if K is None:
-        K = model.residual_and_tangent(q, u)[1]
+        K = model.tangent(q, u)
     lu = factorize(K, single=False, solver=solver_of(model))
     n = K.shape[0]
     k = min(k, n - 2)

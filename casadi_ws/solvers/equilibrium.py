@@ -52,7 +52,7 @@ class Factorization:
 
 def tangent_factorization(model, q: np.ndarray, u: np.ndarray) -> Factorization:
     """A fresh LU of the tangent K at the equilibrium (q, u)."""
-    _, K, _ = model.residual_and_tangent(q, u)
+    K = model.tangent(q, u)
     return _factorization(K, q, model)
 
 
@@ -163,7 +163,7 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
             return stop(MAX_ITERATIONS)
         fresh = need_fresh
         if fresh:
-            _, K, _ = model.residual_and_tangent(q, u, load)
+            K = model.tangent(q, u, load)
             try:
                 fac = _factorization(K, q, model)
             except RuntimeError:  # exactly singular tangent
@@ -228,7 +228,7 @@ def newton_krylov(model, u, q, fac: Factorization, tol: float, max_iter: int = 4
             return None
         if rel < tol:
             return q, rel, n_kry
-        _, K, _ = model.residual_and_tangent(q, u)
+        K = model.tangent(q, u)
         count = [0]
         # inexact Newton: 1e-6 of the residual suffices when the first iterate is a good predictor; GMRES's
         # own test reads the unpreconditioned residual, which stalls near 1e-9 on this ill-conditioned K

@@ -232,7 +232,7 @@ def _derivatives(model, q, u, fac, eta, bsettings, curved: bool = True):
     elif _by_differences(model, bsettings):
         K = TangentProducts(model, q, u)
     else:
-        K = model.residual_and_tangent(q, u)[1]
+        K = model.tangent(q, u)
     A, S, G = sensitivity(model, q, fac, K, compliance=True)
     Q = curvature(model, q, u, S, fac, eta, K) if reduced and bsettings.second_order and curved else None
     return A, S, Q, G
