@@ -318,3 +318,22 @@ def test_workers_are_forked_only_where_that_is_safe(monkeypatch):
     finally:
         stop.set()
         other.join()
+
+
+def _sigint_is_pythons_own():
+    return signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_forked_worker_does_not_keep_its_parents_ctrl_c_handler(monkeypatch):
+    """A worker forked while the caller defers Ctrl-C would run its job on after Ctrl-C; a spawned one never
+    had the handler."""
+    if not sys.platform.startswith("linux"):
+        monkeypatch.setenv("CASADI_WS_START_METHOD", "spawn")
+    else:
+        monkeypatch.setenv("CASADI_WS_START_METHOD", "fork")
+    previous = signal.signal(signal.SIGINT, lambda *_: None)
+    try:
+        with cw.ProcessExecutor(1) as ex:
+            assert ex.submit(_sigint_is_pythons_own).result()
+    finally:
+        signal.signal(signal.SIGINT, previous)

@@ -201,6 +201,12 @@ class _Ready:
 def _init_worker(key, blob_file):
     from threadpoolctl import threadpool_limits
 
+    # Ctrl-C in a worker is Python's KeyboardInterrupt (or ignored, where it was when the parent started), as in a
+    # fresh process: a forked one would otherwise keep a handler its parent set (a deferred one lets the job run on)
+    handler = signal.getsignal(signal.SIGINT)
+    if callable(handler) and handler is not signal.default_int_handler:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
     threadpool_limits(limits=1, user_api="blas")  # for the worker's lifetime
     _huge_pages(False)  # likewise (see small_pages)
     if blob_file is not None:
