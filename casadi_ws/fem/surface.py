@@ -13,7 +13,8 @@ import numpy as np
 
 from .elements import TET10_EDGES
 
-__all__ = ["boundary_faces", "components", "edge_report", "reverse", "winding_number", "winding_numbers"]
+__all__ = ["boundary_faces", "components", "edge_report", "reverse", "signed_distance", "winding_number",
+           "winding_numbers"]
 
 # faces of a positively oriented tetrahedron, normals outwards
 _FACES = ((0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2))
@@ -96,3 +97,32 @@ def winding_numbers(X: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.
     den = la * lb * lc + np.einsum("kij,kij->ki", a, b) * lc + np.einsum("kij,kij->ki", b, c) * la \
         + np.einsum("kij,kij->ki", c, a) * lb
     return np.sum(2 * np.arctan2(num, den), axis=1) / (4 * np.pi)
+
+
+def signed_distance(vertices: np.ndarray, triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Signed distance of each point to the closed surface of ``triangles`` (vertex indices, counter-clockwise
+    seen from outside) over ``vertices``: negative inside, positive outside.
+
+    VTK's implicit distance, called through VTK's own modules rather than pyvista (which calls the same): their
+    import takes ~0.1 s against pyvista's ~0.25 s, paid at the end of every forward-backward run (the points'
+    check against the boundary surface), with the workers idle."""
+    from vtkmodules.util.numpy_support import VTK_ID_TYPE, get_numpy_array_type, numpy_to_vtk, vtk_to_numpy
+    from vtkmodules.vtkCommonCore import vtkDoubleArray, vtkPoints
+    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
+    from vtkmodules.vtkFiltersCore import vtkImplicitPolyDataDistance
+
+    def ids(a):
+        return numpy_to_vtk(np.ascontiguousarray(a, dtype=get_numpy_array_type(VTK_ID_TYPE)), True, VTK_ID_TYPE)
+
+    corners = vtkPoints()
+    corners.SetData(numpy_to_vtk(np.ascontiguousarray(vertices, dtype=float), deep=True))
+    cells = vtkCellArray()
+    cells.SetData(ids(np.arange(0, 3 * len(triangles) + 1, 3)), ids(np.ravel(triangles)))
+    surface = vtkPolyData()
+    surface.SetPoints(corners)
+    surface.SetPolys(cells)
+    distance = vtkImplicitPolyDataDistance()
+    distance.SetInput(surface)
+    out = vtkDoubleArray()
+    distance.FunctionValue(numpy_to_vtk(np.ascontiguousarray(points, dtype=float), deep=True), out)
+    return np.array(vtk_to_numpy(out), dtype=float)
