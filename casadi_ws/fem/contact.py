@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .surface import signed_distance
+
 __all__ = ["ContactSet", "Obstacle", "boundary_nodes", "contact_set", "split_faces"]
 
 
@@ -51,12 +53,7 @@ class Obstacle:
             d = np.column_stack([radial, along])
             return np.linalg.norm(np.maximum(d, 0.0), axis=1) + np.minimum(d.max(axis=1), 0.0)
         if self.kind == "surface":
-            import pyvista as pv
-
-            tris = p["triangles"]
-            surf = pv.PolyData(p["vertices"], np.hstack([np.full((len(tris), 1), 3), tris]).ravel())
-            # VTK's implicit distance is negative inside a closed surface with outward normals
-            return np.asarray(pv.PolyData(x).compute_implicit_distance(surf)["implicit_distance"], dtype=float)
+            return signed_distance(p["vertices"], p["triangles"], x)
         raise ValueError(f"unknown obstacle kind {self.kind!r}")
 
     def gap(self, x: np.ndarray):
