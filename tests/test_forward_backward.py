@@ -248,6 +248,48 @@ def test_prefilter_keeps_what_the_linearised_set_reaches_and_drops_what_it_misse
     assert prefilter(m, eq.q, u, A, eq.tip, [inside, far, corner], eta, None) == [True] * 3
 
 
+def test_prefilter_second_order_model_drops_cells_the_curved_set_misses():
+    """A target whose cell the linearised set misses by less than the threshold is kept by the linear test
+    alone; with the configuration's curvature Q bending the set away from it (by half a cell at the inputs
+    that reach nearest) the second-order model drops it, bending it towards it keeps it."""
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    u = np.array([30.0, 30.0])
+    eq = solve_equilibrium(m, u)
+    A, _ = sensitivity(m, eq.q, tangent_factorization(m, eq.q, u))
+    eta = 0.004
+    n = np.cross(A[:, 0], A[:, 1])
+    n /= np.linalg.norm(n)
+    corner = eq.tip + A @ np.array([10.0, -10.0]) + 0.5 * eta * np.sign(n)  # the cell's corner on the patch
+    target = corner + 0.05 * eta * n  # its cell now misses the patch by ~0.05 step
+    C = m.C_free
+    bent = []
+    for kappa in (-0.5 * eta / 100.0, 0.5 * eta / 100.0):  # d2p/du_i^2 = kappa n: half a cell at |du|^2 = 100
+        CQ = np.column_stack([kappa * n, np.zeros(3), kappa * n])  # pairs (0, 0), (0, 1), (1, 1)
+        Q = (C.T @ np.linalg.solve((C @ C.T).toarray(), CQ)).T.astype(np.float32)  # least-norm, C Q^T = CQ
+        bent.append(prefilter(m, eq.q, u, A, eq.tip, [target], eta, 0.1, True, Q))
+    assert prefilter(m, eq.q, u, A, eq.tip, [target], eta, 0.1, True) == [True]
+    assert bent == [[False], [True]]
+
+
+def test_backward_reports_how_far_the_second_order_model_put_its_first_equilibrium():
+    """BackwardResult.predictor_error: with Q, the first equilibrium's tip lies within a few hundredths of a
+    step of the second-order model's prediction (a one-cell move on the trunk); without Q, None."""
+    pb = small_trunk("corotational", n_cables=2)
+    m = StaticModel(pb)
+    u = np.array([30.0, 30.0])
+    eq = solve_equilibrium(m, u)
+    fac = tangent_factorization(m, eq.q, u)
+    A, S = sensitivity(m, eq.q, fac)
+    eta = 0.004
+    Q = curvature(m, eq.q, u, S, fac, eta, m.tangent(eq.q, u))
+    target = eq.tip + eta * A[:, 0] / np.linalg.norm(A[:, 0])
+    with_q = backward(m, target, eq.q, u, None, eta, BackwardSettings(), sens=(A, S, Q))
+    without = backward(m, target, eq.q, u, None, eta, BackwardSettings(), sens=(A, S))
+    assert with_q.ok and 0 <= with_q.predictor_error < 0.05
+    assert without.ok and without.predictor_error is None
+
+
 def test_neighbourhood_is_the_ring_filtered_by_the_box():
     assert len(NEIGHBOURS) == 26 and np.all(np.abs(NEIGHBOURS).max(axis=1) == 1)
     c = np.zeros(3)

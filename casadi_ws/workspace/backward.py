@@ -110,6 +110,11 @@ class BackwardResult:
     factorizations: int = 0
     fac: Factorization | None = None
     """The last LU of K near the answer, reusable for its sensitivities."""
+    predictor_error: float | None = None
+    """Reduced, started with a curvature Q: how far (infinity norm, in steps ``scale``) the first equilibrium's
+    tip lies from where the second-order model p + A du + C Q(du, du) / 2 put it; None without Q. What the
+    forward-backward method reads to trust that model for the answer's own targets
+    (:func:`casadi_ws.workspace.forward_backward.prefilter`)."""
 
     @property
     def ok(self) -> bool:
@@ -140,6 +145,7 @@ def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardRe
         n_fac += 1
     tip = model.tip(q)
     Q = sens[2] if sens is not None and len(sens) > 2 else None
+    error = None
     for it in range(1, settings.max_iterations + 1):
         A, S = sens[:2] if (it == 1 and sens is not None) else sensitivity(model, q, fac)
         # bounded linear least squares for du: min |tip + A du - target|^2, u_min <= u + du <= u_max (steps
@@ -153,16 +159,19 @@ def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardRe
                 du = du_box
         du = _within_limits(model, q, A, S, target - tip, du, lo, hi)
         if not np.any(du):
-            return BackwardResult(q, u, tip, SOLVED, it - 1, n_eq, n_fac, fac)
+            return BackwardResult(q, u, tip, SOLVED, it - 1, n_eq, n_fac, fac, error)
         if settings.give_up is not None and it > 1 and \
                 np.abs(tip + A @ du - target).max() > (0.5 + settings.give_up) * scale:
-            return BackwardResult(q, u, tip, GAVE_UP, it - 1, n_eq, n_fac, fac)
+            return BackwardResult(q, u, tip, GAVE_UP, it - 1, n_eq, n_fac, fac, error)
         u_new = np.clip(u + applied_step(du, offset), model.u_min, model.u_max)
-        eq = _equilibrium(model, q, u, u_new, S @ du, second_order(Q, du) if (it == 1 and Q is not None) else None)
+        curved = second_order(Q, du) if (it == 1 and Q is not None) else None
+        eq = _equilibrium(model, q, u, u_new, S @ du, curved)
         n_eq += 1
         n_fac += eq.factorizations
         if eq.status != CONVERGED:
             return BackwardResult(q, u, tip, FAILED, it, n_eq, n_fac, fac)
+        if curved is not None:
+            error = float(np.abs(eq.tip - tip - A @ du - model.C_free @ curved).max()) / scale
         moved = np.linalg.norm(eq.tip - tip)
         q, u, tip = eq.q, u_new, eq.tip
         if eq.factorization is not None:
@@ -171,10 +180,10 @@ def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardRe
             fac = tangent_factorization(model, q, u)
             n_fac += 1
         if moved < settings.step_tolerance * scale:
-            return BackwardResult(q, u, tip, SOLVED, it, n_eq, n_fac, fac)
+            return BackwardResult(q, u, tip, SOLVED, it, n_eq, n_fac, fac, error)
         if settings.stop_inside is not None and np.all(np.abs(tip - target) <= settings.stop_inside * scale):
-            return BackwardResult(q, u, tip, SOLVED, it, n_eq, n_fac, fac)
-    return BackwardResult(q, u, tip, ITERATION_LIMIT, settings.max_iterations, n_eq, n_fac, fac)
+            return BackwardResult(q, u, tip, SOLVED, it, n_eq, n_fac, fac, error)
+    return BackwardResult(q, u, tip, ITERATION_LIMIT, settings.max_iterations, n_eq, n_fac, fac, error)
 
 
 def _equilibrium(model, q, u, u_new, linear, curved=None):

@@ -107,6 +107,7 @@ class _Config:
     Q_age: int = 0  # generations since Q was computed (BackwardSettings.curvature_age)
     violations: int = 0  # admissibility violations (bit mask), non-zero only when they are kept
     maps: dict | None = None  # effort, steerability, compliance, tilt, ... (:mod:`.maps`)
+    predictor_error: float | None = None  # how far the second-order model put this tip (steps; BackwardResult)
 
 
 def algorithm1(ex: Exploration, executor: Executor, ctrl_c) -> None:
@@ -126,12 +127,13 @@ def algorithm1(ex: Exploration, executor: Executor, ctrl_c) -> None:
 
 
 def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0, grid=None, reached=frozenset(), p=None,
-            threshold=None):
+            threshold=None, predictor_error=None):
     """Step 3 for one configuration: backward solves of its targets; returns plain data per target.
 
     With the configuration's tip ``p`` and a ``threshold``, the targets are first put to the prefilter
-    (:func:`prefilter`); a dropped target answers :data:`_PREFILTERED`. It runs here, in the worker, rather
-    than in the process handing out the jobs: there, its 2 s on the 4-cable trunk held the lock the pool's
+    (:func:`prefilter`, with the second-order model of Q where ``predictor_error``, that model's miss of this
+    configuration's own tip, says it can be trusted); a dropped target answers :data:`_PREFILTERED`. It runs
+    here, in the worker, rather than in the process handing out the jobs: there, its 2 s on the 4-cable trunk held the lock the pool's
     threads need to feed the workers, and the run took 3-8 s longer (docs/methods.md).
 
     The sensitivities of each new configuration come from the backward's last Newton LU (at the
@@ -151,7 +153,9 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0, grid=None,
     passed_on = Q is not None and Q_age < _curvature_age(model, bsettings)
     kept = [True] * len(targets)
     if p is not None:
-        kept = prefilter(model, q, u, A, p, targets, scale, threshold, bsettings.edge_box is not None)
+        trusted = predictor_error is not None and threshold is not None and predictor_error <= TRUST * threshold
+        kept = prefilter(model, q, u, A, p, targets, scale, threshold, bsettings.edge_box is not None,
+                         Q if trusted else None)
     for target, keep in zip(targets, kept):
         if not keep:
             out.append(_PREFILTERED)
@@ -169,14 +173,14 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0, grid=None,
             violations = admissibility(model, res.q, res.u, fac).mask
             if grid is not None and not _on_target(res.tip, target, scale) and grid.index(res.tip) in reached:
                 out.append((res.q, res.u, res.tip, res.status, res.ok, None, None, None, 0, res.equilibrium_solves,
-                            n_fac, violations, None))
+                            n_fac, violations, None, res.predictor_error))
                 continue
             A_new, S_new, Q_new, G = _derivatives(model, res.q, res.u, fac, scale, bsettings, curved=not passed_on)
             if passed_on:  # the caller has it: not sent back (~0.1 MB an answer on the 4-cable trunk)
                 Q_new, age = None, Q_age + 1
             maps = point_maps(model, res.q, res.u, A_new, fac, G)
         out.append((res.q, res.u, res.tip, res.status, res.ok, A_new, S_new, Q_new, age, res.equilibrium_solves,
-                    n_fac, violations, maps))
+                    n_fac, violations, maps, res.predictor_error))
     return out
 
 
@@ -188,22 +192,69 @@ def _on_target(tip, target, eta) -> bool:
     return bool(np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9)))
 
 
-_PREFILTERED = (None, None, None, int(Status.PREFILTERED), False, None, None, None, 0, 0, 0, 0, None)
+_PREFILTERED = (None, None, None, int(Status.PREFILTERED), False, None, None, None, 0, 0, 0, 0, None, None)
 """A target the prefilter dropped, as :func:`_expand` answers for a target it solved."""
 
 
-def prefilter(model, q, u, A, p, targets, eta, threshold, whole_cell=True) -> list[bool]:
+def prefilter(model, q, u, A, p, targets, eta, threshold, whole_cell=True, Q=None) -> list[bool]:
     """Whether each target of the configuration (q, u), of tip p and Step 1's A, is kept by the prefilter
     (``FBSettings.prefilter``: ``threshold``, in steps eta). ``whole_cell``: a target is kept when the
     linearised reachable set comes near any point of its cell, not only its centre (the backward problem's
-    ``edge_box`` lets an answer land off the centre)."""
+    ``edge_box`` lets an answer land off the centre).
+
+    With the configuration's curvature ``Q`` (d2q/du2, :func:`casadi_ws.solvers.sensitivity.curvature`), a
+    target whose cell the linearised set misses, by less than the threshold, is put to the second-order model
+    p + A du + C Q(du, du) / 2 as well, and dropped where that misses the cell by more than
+    :data:`SECOND_ORDER` x threshold. Why: over a one-cell move the linearisation errs by up to ~0.25 step on the
+    trunks, the second-order model by ~0.06, so the threshold must be wide for the first and need not be for
+    the second. Measured (docs/methods.md): every target a backward solve reached lay in the second-order
+    model's reach, and a third to a half of the solves that missed were spared. The caller passes Q only
+    where the model foretold the configuration's own tip (:data:`TRUST`)."""
     if threshold is None or (model.has_contact and model.min_gap(q) < eta):
         # near a contact the linearisation cannot tell which cells are out of reach: it holds the
         # contacts that releasing an input would open, and misses those a step would close (the tip then
         # slides along the obstacle or the body)
         return [True] * len(targets)
     lo, hi, _ = input_range(model, q, u)
-    return [_linear_gap(A, target - p, lo, hi, eta, threshold, whole_cell) <= threshold * eta for target in targets]
+    T = None if Q is None or not Q.size else _tip_curvature(model, Q)
+    kept = []
+    for target in targets:
+        gap = _linear_gap(A, target - p, lo, hi, eta, threshold, whole_cell)
+        if T is not None and 0 < gap <= threshold * eta:
+            gap = _second_order_gap(A, T, target - p, lo, hi, eta, SECOND_ORDER * threshold, whole_cell) / SECOND_ORDER
+        kept.append(gap <= threshold * eta)
+    return kept
+
+
+SECOND_ORDER = 0.5
+"""The second-order prefilter's threshold, as a share of ``FBSettings.prefilter`` (see :func:`prefilter`)."""
+
+TRUST = 0.25
+"""The second-order model is trusted for a configuration's targets where it put the configuration's own tip
+within this share of ``FBSettings.prefilter`` (``BackwardResult.predictor_error``). Why: where Q is poor
+(measured on a linear-material trunk at 1.5 mm cells: it missed by a step), its model would drop cells."""
+
+
+def _tip_curvature(model, Q) -> np.ndarray:
+    """(3, n_u, n_u): the tip's second derivatives d2p/du_i du_j from Q (rows i <= j, as
+    :func:`casadi_ws.solvers.sensitivity.curvature` returns them)."""
+    n = model.n_u
+    T = np.zeros((3, n, n))
+    i, j = np.triu_indices(n)
+    T[:, i, j] = T[:, j, i] = np.asarray(model.C_free @ Q.astype(float).T)
+    return T
+
+
+def _second_order_gap(A, T, r, lo, hi, eta, threshold, whole_cell, iterations: int = 3) -> float:
+    """:func:`_linear_gap` for the second-order model r(du) = A du + T(du, du) / 2: its closest point to the
+    target by Gauss-Newton from the linear one, and the linear gap of the model linearised there."""
+    du = bounded_step(A, r, lo, hi)
+    for _ in range(iterations):
+        J = A + T @ du
+        du = np.clip(du + bounded_step(J, r - (A + 0.5 * T @ du) @ du, lo - du, hi - du), lo, hi)
+    J = A + T @ du
+    reached = (A + 0.5 * T @ du) @ du
+    return _linear_gap(J, r - reached + J @ du, lo, hi, eta, threshold, whole_cell)
 
 
 def _linear_gap(A, r, lo, hi, eta, threshold, whole_cell) -> float:
@@ -360,7 +411,8 @@ class Exploration:
                 for part in np.array_split(np.arange(len(targets)), min(pieces, len(targets))):
                     sent.append((i, int(part[0])))
                     yield (cfg.q, cfg.u, cfg.A, cfg.S, cfg.Q, [targets[m] for m in part], self.eta(cfg),
-                           self.bsettings, cfg.Q_age, *self._reached_near(cfg), cfg.p, self.settings.prefilter)
+                           self.bsettings, cfg.Q_age, *self._reached_near(cfg), cfg.p, self.settings.prefilter,
+                           cfg.predictor_error)
 
         parts = {}
         for k, out in executor.map_unordered(_expand, self.problem, jobs()):
@@ -390,7 +442,7 @@ class Exploration:
         keep_inadmissible = self.problem.admissibility.keep
         for (cfg, todo), out in zip(tasks, answers):
             eta = self.eta(cfg)
-            for (cell, target), (q, u, tip, status, ok, A, S, Q, age, n_eq, n_fac, viol, maps) in zip(todo, out):
+            for (cell, target), (q, u, tip, status, ok, A, S, Q, age, n_eq, n_fac, viol, maps, error) in zip(todo, out):
                 if status == Status.PREFILTERED:
                     self._fail(target, Status.PREFILTERED)
                     continue
@@ -416,7 +468,7 @@ class Exploration:
                         self.counters["explored"] += 1
                     if not on_target:
                         self.counters["adopted"] += 1
-                    new = _Config(cell, tip, q, u, A, S, cfg.Q if age else Q, age, viol, maps)
+                    new = _Config(cell, tip, q, u, A, S, cfg.Q if age else Q, age, viol, maps, error)
                     self._seed(new)
                     new_frontier.append(new)
                     self.reached.append(new)
@@ -485,6 +537,8 @@ class Exploration:
             arrays["frontier_Q"] = np.array([reached[i].Q for i in fr], dtype=np.float32).reshape(
                 len(fr), m.n_u * (m.n_u + 1) // 2, m.n_free)
             arrays["frontier_Q_age"] = np.array([reached[i].Q_age for i in fr], dtype=np.int64)
+            arrays["frontier_predictor_error"] = np.array(
+                [np.nan if reached[i].predictor_error is None else reached[i].predictor_error for i in fr])
         self.run.save({"counters": self.counters, "timings": self.timings}, arrays)
 
     def restore(self, meta: dict, a: dict) -> None:
@@ -502,6 +556,8 @@ class Exploration:
                                         int(a["frontier_Q_age"][k]) if f and "frontier_Q" in a else 0,
                                         int(a["violations"][i])))
         self.frontier = [self.reached[i] for i in sorted(fset)]
+        for c, e in zip(self.frontier, a.get("frontier_predictor_error", ())):
+            c.predictor_error = None if np.isnan(e) else float(e)
         self.reached_cells = {c.cell for c in self.reached}
         self.visited = {tuple(int(c) for c in v) for v in a["visited"]}
         self.visited_pts = list(a["visited_pts"])
