@@ -71,7 +71,9 @@ class FBSettings:
     already loses 6 % (its cables' geometric stiffness bends the workspace more per cell). Not applied from
     a configuration whose body is within a step of an obstacle (the linearisation does not see contacts
     close or open); a cell wholly inside an obstacle is always dropped (the tip is inside the body, which
-    never enters one). Recorded as ``prefiltered``. None: off (the paper's rule)."""
+    never enters one). Where the configuration has a curvature Q that foretold its own tip, a target the
+    linear test keeps by a margin below the threshold is put to the second-order model too, at half the
+    threshold (:func:`prefilter`). Recorded as ``prefiltered``. None: off (the paper's rule)."""
     cells_meeting_box: bool = True
     """Step 2 keeps the neighbours whose *cell* meets the Step-1 box (the box grown by half a step), not
     only those whose centre lies in it as (7) states: a cell is reached by any point in it, and along the
