@@ -135,8 +135,9 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0, grid=None,
     With the configuration's tip ``p`` and a ``threshold``, the targets are first put to the prefilter
     (:func:`prefilter`, with the second-order model of Q where ``predictor_error``, that model's miss of this
     configuration's own tip, says it can be trusted); a dropped target answers :data:`_PREFILTERED`. It runs
-    here, in the worker, rather than in the process handing out the jobs: there, its 2 s on the 4-cable trunk held the lock the pool's
-    threads need to feed the workers, and the run took 3-8 s longer (docs/methods.md).
+    here, in the worker, rather than in the process handing out the jobs: there, its 2 s on the 4-cable trunk
+    held the lock the pool's threads need to feed the workers, and the run took 3-8 s longer
+    (docs/methods.md).
 
     The sensitivities of each new configuration come from the backward's last Newton LU (at the
     second-order predictor, one iterate from the answer), refined with the exact tangent at the answer
