@@ -224,19 +224,25 @@ def test_distance_below_bounds_the_prefilter_gap(rng):
         assert closest_to_box(A, r, lo, hi, h)[1] >= d / np.sqrt(3) - h - 1e-12
 
 
-def test_prefilter_keeps_what_the_linearised_set_reaches_and_drops_what_it_misses():
-    """A target the linearised reachable set p + A du (du within the remaining inputs) reaches is kept, one it
-    misses by many cells is dropped, a cell whose centre it misses but whose corner it touches is kept as a
-    whole cell (the backward may land off the centre), and no threshold keeps everything."""
+def _flat_patch():
+    """The small 2-cable trunk at u = (30, 30) N: model, u, equilibrium, A, and the unit normal of the linearised
+    reachable set p + A du, a flat patch (two inputs)."""
     pb = small_trunk("corotational", n_cables=2)
     m = StaticModel(pb)
     u = np.array([30.0, 30.0])
     eq = solve_equilibrium(m, u)
     A, _ = sensitivity(m, eq.q, tangent_factorization(m, eq.q, u))
-    eta = 0.004
-    inside = eq.tip + A @ np.array([10.0, -10.0])  # the set is a flat patch here (two inputs)
     n = np.cross(A[:, 0], A[:, 1])
-    n /= np.linalg.norm(n)
+    return m, u, eq, A, n / np.linalg.norm(n)
+
+
+def test_prefilter_keeps_what_the_linearised_set_reaches_and_drops_what_it_misses():
+    """A target the linearised reachable set p + A du (du within the remaining inputs) reaches is kept, one it
+    misses by many cells is dropped, a cell whose centre it misses but whose corner it touches is kept as a
+    whole cell (the backward may land off the centre), and no threshold keeps everything."""
+    m, u, eq, A, n = _flat_patch()
+    eta = 0.004
+    inside = eq.tip + A @ np.array([10.0, -10.0])
     far = inside + 10 * eta * n
     # the cell's corner nearest the patch lies on it; its centre, in the infinity norm, lies
     # 0.5 eta (|n|_1 |n|_inf - 1) beyond half a cell from it: more than the prefilter's 0.1 eta
@@ -252,14 +258,8 @@ def test_prefilter_second_order_model_drops_cells_the_curved_set_misses():
     """A target whose cell the linearised set misses by less than the threshold is kept by the linear test
     alone; with the configuration's curvature Q bending the set away from it (by half a cell at the inputs
     that reach nearest) the second-order model drops it, bending it towards it keeps it."""
-    pb = small_trunk("corotational", n_cables=2)
-    m = StaticModel(pb)
-    u = np.array([30.0, 30.0])
-    eq = solve_equilibrium(m, u)
-    A, _ = sensitivity(m, eq.q, tangent_factorization(m, eq.q, u))
+    m, u, eq, A, n = _flat_patch()
     eta = 0.004
-    n = np.cross(A[:, 0], A[:, 1])
-    n /= np.linalg.norm(n)
     corner = eq.tip + A @ np.array([10.0, -10.0]) + 0.5 * eta * np.sign(n)  # the cell's corner on the patch
     target = corner + 0.05 * eta * n  # its cell now misses the patch by ~0.05 step
     C = m.C_free
