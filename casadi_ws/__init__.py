@@ -13,7 +13,7 @@ from .fem import (TET4, ElementType, Material, Mesh, MeshError, StaticModel, box
 from .io import Problem, ProblemError, SolverSettings, default_problem, load_problem, problem_from_dict
 from .runtime import DaskExecutor, Executor, ProcessExecutor, SerialExecutor
 from .nlp import EquilibriumNLP, NLPSolution, tracking
-from .solvers import Equilibrium, equilibrium_function, solve_equilibrium
+from .solvers import Equilibrium, equilibrium_function, quasi_static, solve_equilibrium
 from .status import Status
 from .study import Study, StudyResult, load_study, run_study
 from .workspace import (BackwardSettings, FBSettings, ForwardSettings, Task, WorkspaceResult, compare, forward,
@@ -64,6 +64,7 @@ __all__ = [
     "measures",
     "point_function",
     "problem_from_dict",
+    "quasi_static",
     "reach",
     "residual_function",
     "run_study",

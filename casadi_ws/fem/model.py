@@ -461,6 +461,19 @@ class StaticModel:
         m, nq = self._G_qp.shape[:2]
         return np.eye(3) + (self._F_op @ q).reshape(m, nq, 3, 3)
 
+    def node_sizes(self) -> np.ndarray:
+        """Per node, the mean edge of the smallest element it belongs to (m): the scale of a safe nodal move
+        (Newton's trust region, :data:`casadi_ws.solvers.equilibrium.TRUST_REGION`)."""
+        if "_node_sizes" not in self.__dict__:
+            corners = self.mesh.nodes[self.mesh.tets[:, :4]]
+            pairs = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+            h = np.mean([np.linalg.norm(corners[:, a] - corners[:, b], axis=1) for a, b in pairs], axis=0)
+            size = np.full(self.n_nodes, np.inf)
+            np.minimum.at(size, self.mesh.tets.ravel(), np.repeat(h, self.mesh.tets.shape[1]))
+            size[~np.isfinite(size)] = h.max()  # nodes of no element
+            self._node_sizes = size
+        return self._node_sizes
+
     def jacobians(self, q: np.ndarray) -> np.ndarray:
         """det F at every quadrature point, (m, n_qp), from the element's nodal displacements.
 

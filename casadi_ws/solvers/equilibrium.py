@@ -12,6 +12,7 @@ Status codes (``Equilibrium.status``): 0-4 of :mod:`casadi_ws.status` (0 converg
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import IntEnum
 
 import numpy as np
 
@@ -19,11 +20,33 @@ from ..status import Status
 from .linear import SINGLE_PRECISION_PROBE, factorize, solver_of  # noqa: F401  (re-exported)
 
 __all__ = ["CONVERGED", "CONTINUATION_FAILED", "DIVERGED", "Equilibrium", "Factorization", "MAX_ITERATIONS",
-           "OUTSIDE_BOUNDS", "designed_negatives", "factorize", "inside_bounds", "newton_krylov", "solve_equilibrium",
+           "OUTSIDE_BOUNDS", "Branch", "SAME_STATE", "TRUST_REGION", "VOLUME_KEPT", "admissible_guess",
+           "designed_negatives", "factorize", "inside_bounds", "newton_krylov", "quasi_static", "solve_equilibrium",
            "tangent_factorization", "verify"]
 
 CONVERGED, MAX_ITERATIONS, DIVERGED, CONTINUATION_FAILED, OUTSIDE_BOUNDS = (
     Status.CONVERGED, Status.MAX_ITERATIONS, Status.DIVERGED, Status.CONTINUATION_FAILED, Status.OUTSIDE_BOUNDS)
+
+
+class Branch(IntEnum):
+    """How a solve made sure its answer is on the branch of the equilibrium it started from
+    (:attr:`Equilibrium.branch`; docs/methods.md "One answer per input")."""
+
+    NEAR = 0
+    """Newton converged without shortening a step: it stayed near its first iterate."""
+    MIDPOINT = 1
+    """Some step was shortened; the midpoint test found the answer on the start's branch."""
+    PATH_AGREED = 2
+    """The midpoint test failed; the answer re-solved along the path from the start (:func:`quasi_static`)
+    is the same state."""
+    PATH_REPLACED = 3
+    """The path from the start reached another equilibrium, which replaced Newton's answer."""
+    PATH_DEPENDENT = 4
+    """The answer depends on the path: loaded from the start and from rest the robot comes to different
+    stable equilibria (hysteresis: buckling, snap-through, contact that holds); the one from rest is reported,
+    so that results do not depend on the method's settings."""
+    UNCONFIRMED = 5
+    """The midpoint test failed and the path from the start did not converge: Newton's answer is kept."""
 
 
 @dataclass
@@ -94,6 +117,8 @@ class Equilibrium:
     """Continuation steps used (0: direct solve)."""
     factorization: Factorization | None = field(default=None, repr=False)
     """Latest factorisation, reusable to warm-start a nearby solve."""
+    branch: int = 0
+    """How the answer was made sure to be on its start's branch: a :class:`Branch` code."""
 
     @property
     def converged(self) -> bool:
@@ -102,6 +127,10 @@ class Equilibrium:
     @property
     def status_name(self) -> str:
         return Status(self.status).label
+
+    @property
+    def path_dependent(self) -> bool:
+        return self.branch == Branch.PATH_DEPENDENT
 
     def to_dict(self) -> dict:
         return {"tip": self.tip.tolist(), "u": self.u.tolist(), "converged": self.converged,
@@ -118,10 +147,64 @@ class _Newton:
     factorizations: int
     residual: float
     fac: Factorization | None
+    damped: bool = False
+    """Some step was shortened by the line search (the full Newton step failed the monotonicity test): the
+    iterates may have left the first one's neighbourhood, so :func:`solve_equilibrium` checks the branch."""
+
+
+TRUST_REGION = 0.25
+"""Largest nodal move of a Newton step, as a share of the local element size (the mean edge of the smallest
+element at the node), that may be taken on a lowered residual alone (see :func:`_newton`)."""
+
+VOLUME_KEPT = 0.75
+"""Within one Newton solve no element may shrink below this share of its volume at the first iterate (of its
+rest volume where the first iterate has it swollen): the crushed branches of the trunk's tip cap lie at
+det F ~0.45 from ~0.99, while over every Newton solve of the shipped problems' forward sweeps the smallest
+ratio was 0.91 (see :func:`_newton`)."""
+
+
+def admissible_guess(model, q: np.ndarray) -> bool:
+    """Whether a first iterate keeps every element above the admissibility floor of det F (Newton never takes
+    an iterate below it, :func:`_newton`; a predictor that does mixes branches)."""
+    guard = _Guard(model)
+    return guard.min_det(q) >= guard.floor
+
+
+class _Guard:
+    """What keeps Newton on its branch (docs/methods.md "One answer per input"): the floor of det F, the
+    volume each element keeps, and the trust region of the steps taken without the monotonicity test's
+    consent."""
+
+    def __init__(self, model, q_first: np.ndarray | None = None):
+        self.model = model
+        adm = getattr(getattr(model, "problem", None), "admissibility", None)
+        self.floor = float(getattr(adm, "min_det_F", 0.1))
+        self.size = model.node_sizes()
+        if q_first is not None:
+            j = model.jacobians(q_first)
+            self.kept = VOLUME_KEPT * np.minimum(j, 1.0)
+            self.j_now = float(j.min())
+
+    def min_det(self, q) -> float:
+        return float(self.model.jacobians(q).min())
+
+    def crushes(self, q) -> tuple[bool, float]:
+        """(whether the state q takes an element below the floor -- or below its present smallest det F,
+        where that is lower -- or below the volume it keeps; its smallest det F)."""
+        j = self.model.jacobians(q)
+        j_min = float(j.min())
+        return not (j_min >= min(self.floor, self.j_now) and np.all(j >= self.kept)), j_min
+
+    def reach(self, step_free) -> float:
+        """The largest nodal move of a step on the free dofs, in local element sizes."""
+        m = self.model
+        d = np.zeros(m.n_mech)
+        d[m.free_mech] = step_free[: m.n_free_mech]
+        return float(np.max(np.linalg.norm(d.reshape(-1, 3), axis=1) / self.size))
 
 
 def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target: float | None = None) -> _Newton:
-    """Newton on the free dofs with Deuflhard's natural-monotonicity test.
+    """Newton on the free dofs with Deuflhard's natural-monotonicity test, kept on its branch.
 
     A step dq = -K^-1 R is judged by the simplified correction dq' = -K^-1 R(q + a dq) with the same
     factorisation: it is accepted when ||dq'|| < (1 - a/4) ||dq||, else a is halved. This test is
@@ -129,12 +212,22 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
     The same ratio says whether a factorisation is worth keeping: while it contracts the correction at
     least 4x per step, or the residual 5x (chord iterations, ~20x cheaper than refactorising), it is
     reused, otherwise refreshed. In soft, cable-loaded bodies the correction can stall in a soft mode while
-    the residual, which is what verification reads, falls 1000x: a chord step that cuts the residual 100x
-    is therefore taken even when the correction test objects. A factorisation passed in is tried first.
+    the residual, which is what verification reads, falls 1000x: a step that cuts the residual 100x is
+    therefore taken even when the correction test objects (within the trust region, below). A factorisation
+    passed in is tried first.
     With ``solver.newton: rootfinder`` the solve is casadi.rootfinder's instead (:mod:`.rootfinder`).
 
-    With ``target`` (< tol) it iterates on towards that residual, but a stop below ``tol`` still counts as
-    converged: a point is never a failure once its residual passes the check.
+    Three rules keep the iterates on the branch they start on (docs/methods.md "One answer per input"): no
+    trial state takes an element below the admissibility floor of det F (or below its present det F where
+    that is already lower), nor below :data:`VOLUME_KEPT` of its volume at the first iterate; and the steps
+    taken without the monotonicity test's consent -- a step cut where a contact point reaches its surface, a
+    step that only lowers the residual -- must stay within :data:`TRUST_REGION` of the local element size.
+    Without them a full 14 mm step from a good guess crushed the trunk's tip onto a non-physical branch
+    (det F 0.46) that Newton then converged on.
+
+    With ``target`` (< tol) it iterates on towards that residual while accepted steps still lower it and are
+    not round-off (1e-13 of q), but a stop below ``tol`` counts as converged: a point is never a failure once
+    its residual passes the check.
     """
     if getattr(model.problem.solver, "newton", "builtin") == "rootfinder":
         from .rootfinder import rootfinder_newton
@@ -143,6 +236,8 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
         status = CONVERGED if rel < tol else (DIVERGED if not np.isfinite(rel) else MAX_ITERATIONS)
         return _Newton(q, status, its, its, rel, None)
     free = model.free
+    guard = _Guard(model, q)
+    contact = getattr(model, "has_contact", False)
     q = q.copy()
     R, scale = model.residual(q, u, load, with_scale=True)
     its = nfac = 0
@@ -150,15 +245,20 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
     dq = None if need_fresh else -fac.solve(R)
     goal = tol if target is None else min(tol, target)
 
+    damped = False
+
+    def done(status):
+        return _Newton(q, status, its, nfac, rel, fac, damped)
+
     def stop(status):
-        return _Newton(q, CONVERGED if rel < tol else status, its, nfac, rel, fac)
+        return done(CONVERGED if rel < tol else status)
 
     while True:
         rel = np.linalg.norm(R) / scale
         if not np.isfinite(rel):
-            return _Newton(q, DIVERGED, its, nfac, rel, fac)
+            return done(DIVERGED)
         if rel < goal:
-            return _Newton(q, CONVERGED, its, nfac, rel, fac)
+            return done(CONVERGED)
         if its >= max_iter:
             return stop(MAX_ITERATIONS)
         fresh = need_fresh
@@ -172,28 +272,38 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
             dq = -fac.solve(R)
         its += 1
         size = np.linalg.norm(dq)
-        alpha = alpha0 = model.contact_step_limit(q, dq) if getattr(model, "has_contact", False) else 1.0
+        alpha = alpha0 = model.contact_step_limit(q, dq) if contact else 1.0
         while True:
             q_try = q.copy()
             q_try[free] += alpha * dq
+            crushes, j_try = guard.crushes(q_try)
             R_try, scale_try = model.residual(q_try, u, load, with_scale=True)
             rel_try = np.linalg.norm(R_try) / scale_try
-            if rel_try < goal:  # verified: the simplified correction's solve would judge a step already done
-                q, rel = q_try, rel_try
-                return _Newton(q, CONVERGED, its, nfac, rel, fac)
+            if rel_try < goal and not crushes:  # verified: the simplified correction would judge a step done
+                q, rel, damped = q_try, rel_try, damped or alpha < alpha0
+                return done(CONVERGED)
             dq_bar = -fac.solve(R_try) if np.all(np.isfinite(R_try)) else None
             theta = np.linalg.norm(dq_bar) / size if dq_bar is not None else np.inf
             ok = bool(theta < 1.0 - alpha / 4.0)
-            if not ok and alpha == alpha0 < 1.0 and np.isfinite(theta):
-                # a step cut where a contact point reaches its surface: taken as it is (a trust region); the
-                # Newton step beyond it, which the test judges, crosses the contact's switch and means little
-                ok = True
-            if not ok and not fresh and np.isfinite(theta):
-                ok = bool(rel_try < 1e-2 * rel)
-            if not ok and fresh and getattr(model, "has_contact", False) and np.isfinite(theta):
-                # a contact point grazing its surface (gap and force both ~0) makes the smoothed complementarity
-                # row all curvature: the Newton increments stop contracting while the residual still falls
-                ok = bool(rel_try < (1.0 - alpha / 4.0) * rel)
+            if not ok and np.isfinite(theta) and guard.reach(alpha * dq) <= TRUST_REGION:
+                # steps the test objects to, taken within the trust region only
+                if alpha == alpha0 < 1.0:
+                    # a step cut where a contact point reaches its surface: taken as it is; the Newton step
+                    # beyond it, which the test judges, crosses the contact's switch and means little
+                    ok = True
+                elif rel_try < 1e-2 * rel:
+                    # in soft, cable-loaded bodies the correction can stall in a soft mode while the residual,
+                    # which is what verification reads, falls 100-1000x
+                    ok = True
+                elif fresh and contact:
+                    # a contact point grazing its surface (gap and force both ~0) makes the smoothed
+                    # complementarity row all curvature: the increments stop contracting while the residual falls
+                    ok = bool(rel_try < (1.0 - alpha / 4.0) * rel)
+            ok = ok and not crushes
+            if rel < tol and not (ok and rel_try < rel and alpha * size > 1e-13 * np.linalg.norm(q)):
+                # polishing towards ``target`` has reached round-off (the residual of trunk_table at rest
+                # wandered about 2e-10 for 25 iterations and 17 LUs): the point is verified as it is
+                return done(CONVERGED)
             if ok or not fresh:
                 break
             alpha *= 0.5
@@ -205,7 +315,8 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
         contracts = theta < 0.25 or rel_next < 0.2 * rel or (theta < 0.7 and rel_next * theta**3 < tol)
         need_fresh = not (ok and alpha == 1.0 and contracts)
         if ok:
-            q, R, scale, dq = q_try, R_try, scale_try, dq_bar
+            damped = damped or alpha < alpha0
+            q, R, scale, dq, guard.j_now = q_try, R_try, scale_try, dq_bar, j_try
 
 
 def newton_krylov(model, u, q, fac: Factorization, tol: float, max_iter: int = 4, max_krylov: int = 12):
@@ -250,13 +361,14 @@ def solve_equilibrium(model, u, q0: np.ndarray | None = None, u0: np.ndarray | N
                       fac: Factorization | None = None, tol: float | None = None,
                       max_iter: int | None = None, continuation: bool = True,
                       guess: np.ndarray | None = None, target: float | None = None) -> Equilibrium:
-    """Solve R(q, u) = 0.
+    """Solve R(q, u) = 0: the equilibrium the robot reaches from the known one (q0, u0), or from rest.
 
-    ``q0`` is a known equilibrium at tensions ``u0`` (default: rest): the warm start, and the start of a
-    continuation if the direct solve fails. ``guess`` overrides the first iterate (e.g. a predictor).
-    ``fac`` is a factorisation to try reusing. ``tol`` and ``max_iter`` default to the problem's settings.
-    ``target`` (< tol): iterate on towards this residual, e.g. for points that others are interpolated from;
-    the point is accepted at ``tol`` all the same.
+    ``q0`` is a known equilibrium at tensions ``u0`` (default: rest): the warm start, the start of a
+    continuation if the direct solve fails, and the neighbour whose branch the answer must be on (a Newton
+    whose steps were shortened is checked, :attr:`Equilibrium.branch`). ``guess`` overrides the first iterate
+    (e.g. a predictor). ``fac`` is a factorisation to try reusing. ``tol`` and ``max_iter`` default to the
+    problem's settings. ``target`` (< tol): iterate on towards this residual, e.g. for points that others are
+    interpolated from; the point is accepted at ``tol`` all the same.
     """
     settings = model.problem.solver
     tol = settings.tolerance if tol is None else tol
@@ -267,17 +379,20 @@ def solve_equilibrium(model, u, q0: np.ndarray | None = None, u0: np.ndarray | N
     q = np.zeros(model.n_dof) if q0 is None else np.asarray(q0, dtype=float).copy()
     if guess is not None:
         q = np.asarray(guess, dtype=float).copy()
+    if q0 is not None and u0 is not None:
+        start = (np.asarray(q0, dtype=float), np.asarray(u0, dtype=float), 1.0)
+    else:
+        start = (np.zeros(model.n_dof), np.zeros(model.n_u), 0.0)
 
     res = _newton(model, u, q, 1.0, tol, max_iter, fac, target)
-    its, nfac, steps = res.iterations, res.factorizations, 0
+    its, nfac, steps, branch = res.iterations, res.factorizations, 0, 0
     if res.status != CONVERGED and continuation:
-        if q0 is not None and u0 is not None:
-            q_s, u_s, load_s = np.asarray(q0, dtype=float).copy(), np.asarray(u0, dtype=float), 1.0
-        else:
-            q_s, u_s, load_s = np.zeros(model.n_dof), np.zeros(model.n_u), 0.0
-        res, s_its, s_fac, steps = _continuation(model, q_s, u_s, load_s, u, tol, max_iter,
-                                                 settings.max_load_steps, res.fac)
+        res, s_its, s_fac, steps = _continuation(model, *start, u, tol, max_iter, settings.max_load_steps, res.fac)
         its, nfac = its + s_its, nfac + s_fac
+    elif res.status == CONVERGED and res.damped and q0 is not None and u0 is not None and np.any(start[1] != u):
+        # (with u0 = u there is no path to check: what changed is not an input, e.g. a load stable_branch moves)
+        res, branch, counts = _check_branch(model, res, start, u, tol, max_iter, settings.max_load_steps)
+        its, nfac, steps = its + counts[0], nfac + counts[1], counts[2]
     status = res.status
     residual = res.residual
     if status == CONTINUATION_FAILED:  # res.q belongs to a partial load: judge it at the asked u instead
@@ -285,7 +400,71 @@ def solve_equilibrium(model, u, q0: np.ndarray | None = None, u0: np.ndarray | N
         residual = float(np.linalg.norm(R) / scale)
     if status == CONVERGED and not inside_bounds(model, u):
         status = OUTSIDE_BOUNDS
-    return Equilibrium(res.q, u, model.tip(res.q), status, its, nfac, float(residual), steps, res.fac)
+    return Equilibrium(res.q, u, model.tip(res.q), status, its, nfac, float(residual), steps, res.fac, int(branch))
+
+
+SAME_STATE = 1e-3
+"""Two equilibria are the same state when no node is farther apart than this share of its element size."""
+
+
+def _apart(model, qa, qb) -> float:
+    """The largest nodal distance between two states, in local element sizes."""
+    d = (np.asarray(qa)[: model.n_mech] - np.asarray(qb)[: model.n_mech]).reshape(-1, 3)
+    return float(np.max(np.linalg.norm(d, axis=1) / model.node_sizes()))
+
+
+def _check_branch(model, res, start, u, tol, max_iter, max_steps):
+    """After a Newton whose steps were shortened: is its answer on the branch of ``start`` = (q, u, load)?
+
+    The midpoint test (cheap: one Newton solve): halfway between the start and the answer, the mean of the
+    two states must lie within a quarter of their distance of the equilibrium there; two states of one branch
+    pass (the branch is smooth between them: 0.5-3 % of the distance on the contact-free trunks), a crushed
+    and an intact one do not. Where it
+    fails, the answer is re-solved along the path from the start (:func:`_continuation`), and where that
+    reaches another equilibrium and the start was not rest, along the path from rest too (a
+    :class:`Branch` code says which). Returns (result, branch code, (iterations, factorisations, load steps))."""
+    q_s, u_s, load_s = start
+    q_mid = (q_s + res.q) / 2
+    mid = _newton(model, (u_s + u) / 2, q_mid, (load_s + 1.0) / 2, tol, max_iter, None)
+    its, nfac = mid.iterations, mid.factorizations
+    if mid.status == CONVERGED and _apart(model, mid.q, q_mid) <= 0.25 * max(_apart(model, res.q, q_s), 4 * SAME_STATE):
+        return res, Branch.MIDPOINT, (its, nfac, 0)
+    path, p_its, p_fac, steps = _continuation(model, q_s, u_s, load_s, u, tol, max_iter, max_steps, None)
+    its, nfac = its + p_its, nfac + p_fac
+    if path.status != CONVERGED:
+        return res, Branch.UNCONFIRMED, (its, nfac, steps)
+    if _apart(model, path.q, res.q) <= SAME_STATE:
+        return res, Branch.PATH_AGREED, (its, nfac, steps)
+    if load_s == 0.0:  # the start was rest: the path's answer is the definition's
+        return path, Branch.PATH_REPLACED, (its, nfac, steps)
+    rest, r_its, r_fac, r_steps = _continuation(model, np.zeros(model.n_dof), np.zeros(model.n_u), 0.0, u, tol,
+                                                max_iter, max_steps, None)
+    its, nfac, steps = its + r_its, nfac + r_fac, steps + r_steps
+    if rest.status != CONVERGED or _apart(model, path.q, rest.q) <= SAME_STATE:
+        return path, Branch.PATH_REPLACED, (its, nfac, steps)
+    return rest, Branch.PATH_DEPENDENT, (its, nfac, steps)
+
+
+def quasi_static(model, u, q0: np.ndarray | None = None, u0: np.ndarray | None = None,
+                 tol: float | None = None, max_step: float = 0.1) -> Equilibrium:
+    """The equilibrium the robot reaches when its inputs move along the straight path from ``u0`` (at the
+    equilibrium ``q0``; default: rest, gravity and loads applied with the inputs) to ``u``, in steps of at
+    most ``max_step`` of the way (smaller where a step fails). The definition of a reported point
+    (docs/methods.md "One answer per input"), and the reference the tests compare every method's points
+    with."""
+    settings = model.problem.solver
+    tol = settings.tolerance if tol is None else tol
+    u = np.asarray(u, dtype=float).reshape(-1)
+    if q0 is not None and u0 is not None:
+        q_s, u_s, load_s = np.asarray(q0, dtype=float), np.asarray(u0, dtype=float), 1.0
+    else:
+        q_s, u_s, load_s = np.zeros(model.n_dof), np.zeros(model.n_u), 0.0
+    res, its, nfac, steps = _continuation(model, q_s, u_s, load_s, u, tol, settings.max_iterations,
+                                          max(settings.max_load_steps, int(np.ceil(4 / max_step))), None, max_step)
+    status = res.status
+    if status == CONVERGED and not inside_bounds(model, u):
+        status = OUTSIDE_BOUNDS
+    return Equilibrium(res.q, u, model.tip(res.q), status, its, nfac, float(res.residual), steps, res.fac)
 
 
 def inside_bounds(model, u) -> bool:
@@ -304,9 +483,10 @@ def verify(model, u, q, tol: float) -> Equilibrium:
     return Equilibrium(q, u.copy(), model.tip(q), status, 0, 0, rel, 0, None)
 
 
-def _continuation(model, q, u_start, load_start, u_end, tol, max_iter, max_steps, fac):
-    """Apply (u, load) from (u_start, load_start) to (u_end, 1) in adaptive steps, predictor = secant."""
-    s, ds = 0.0, 0.25
+def _continuation(model, q, u_start, load_start, u_end, tol, max_iter, max_steps, fac, max_step: float = 1.0):
+    """Apply (u, load) from (u_start, load_start) to (u_end, 1) in adaptive steps (the first a quarter of the
+    way, at most ``max_step``), predictor = secant."""
+    s, ds = 0.0, min(0.25, max_step)
     its = nfac = steps = 0
     prev = None  # (s, q) of the previous converged step, for the secant predictor
     last = _Newton(q, CONTINUATION_FAILED, 0, 0, float("nan"), fac)
@@ -320,7 +500,7 @@ def _continuation(model, q, u_start, load_start, u_end, tol, max_iter, max_steps
         if r.status == CONVERGED:
             prev, q, s = (s, q), r.q, t
             last = r
-            ds = min(2.0 * ds, 1.0)
+            ds = min(2.0 * ds, max_step)
         else:
             ds *= 0.5
             if ds < 1e-4:
