@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..solvers.equilibrium import CONVERGED, solve_equilibrium, tangent_factorization
+from ..solvers.equilibrium import CONVERGED, admissible_guess, solve_equilibrium, tangent_factorization
 from ..solvers.sensitivity import applied_step, bounded_step, input_range, sensitivity
 from ..workspace.backward import _within_limits
 from ..status import Status
@@ -237,7 +237,7 @@ def _reduced(model, W, targets, q, u, settings: ReachSettings, u_ref, u_box=None
             u_new = np.clip(u + applied_step(du, offset), model.u_min, model.u_max)
             guess = q.copy()
             guess[model.free] += S @ du
-            eq = solve_equilibrium(model, u_new, q0=q, u0=u, guess=guess)
+            eq = solve_equilibrium(model, u_new, q0=q, u0=u, guess=guess if admissible_guess(model, guess) else q)
             f_new = cost(eq.q, u_new) if eq.status == CONVERGED else np.inf
             if f_new < f:
                 break

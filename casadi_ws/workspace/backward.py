@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..solvers.equilibrium import CONVERGED, Factorization, solve_equilibrium, tangent_factorization
+from ..solvers.equilibrium import CONVERGED, Factorization, admissible_guess, solve_equilibrium, tangent_factorization
 from ..solvers.sensitivity import (applied_step, bounded_step, closest_to_box, input_range, limited_step, second_order,
                                    sensitivity)
 from ..status import Status
@@ -122,6 +122,10 @@ class BackwardResult:
     forward-backward method reads to trust that model for the answer's own targets
     (:func:`casadi_ws.workspace.forward_backward.prefilter`)."""
 
+    branch: int = 0
+    """The answer's :class:`casadi_ws.solvers.equilibrium.Branch` code (``PATH_DEPENDENT``: the equilibrium
+    from rest is the answer, another one is reached from the start)."""
+
     @property
     def ok(self) -> bool:
         """A new verified equilibrium was found (the status is not ``solve_failed``)."""
@@ -151,7 +155,7 @@ def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardRe
         n_fac += 1
     tip = model.tip(q)
     Q = sens[2] if sens is not None and len(sens) > 2 else None
-    error = None
+    error, branch = None, 0
     for it in range(1, settings.max_iterations + 1):
         A, S = sens[:2] if (it == 1 and sens is not None) else sensitivity(model, q, fac)
         # bounded linear least squares for du: min |tip + A du - target|^2, u_min <= u + du <= u_max (steps
@@ -165,34 +169,34 @@ def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardRe
                 du = du_box
         du = _within_limits(model, q, A, S, target - tip, du, lo, hi)
         if not np.any(du):
-            return BackwardResult(q, u, tip, SOLVED, it - 1, n_eq, n_fac, fac, error)
+            return BackwardResult(q, u, tip, SOLVED, it - 1, n_eq, n_fac, fac, error, branch)
         if settings.give_up is not None and it > 1:
             move = A @ du
             margin = settings.give_up if np.linalg.norm(move) >= 0.1 * scale else \
                 min(settings.give_up, settings.give_up_short)
             if np.abs(tip + move - target).max() > (0.5 + margin) * scale:
-                return BackwardResult(q, u, tip, GAVE_UP, it - 1, n_eq, n_fac, fac, error)
+                return BackwardResult(q, u, tip, GAVE_UP, it - 1, n_eq, n_fac, fac, error, branch)
         u_new = np.clip(u + applied_step(du, offset), model.u_min, model.u_max)
         curved = second_order(Q, du) if (it == 1 and Q is not None) else None
         eq = _equilibrium(model, q, u, u_new, S @ du, curved)
         n_eq += 1
         n_fac += eq.factorizations
         if eq.status != CONVERGED:
-            return BackwardResult(q, u, tip, FAILED, it, n_eq, n_fac, fac)
+            return BackwardResult(q, u, tip, FAILED, it, n_eq, n_fac, fac, error, branch)
         if curved is not None:
             error = float(np.abs(eq.tip - tip - A @ du - model.C_free @ curved).max()) / scale
         moved = np.linalg.norm(eq.tip - tip)
-        q, u, tip = eq.q, u_new, eq.tip
+        q, u, tip, branch = eq.q, u_new, eq.tip, eq.branch
         if eq.factorization is not None:
             fac = eq.factorization
         elif fac is None:  # Newton needed no step and there was no LU yet
             fac = tangent_factorization(model, q, u)
             n_fac += 1
         if moved < settings.step_tolerance * scale:
-            return BackwardResult(q, u, tip, SOLVED, it, n_eq, n_fac, fac, error)
+            return BackwardResult(q, u, tip, SOLVED, it, n_eq, n_fac, fac, error, branch)
         if settings.stop_inside is not None and np.all(np.abs(tip - target) <= settings.stop_inside * scale):
-            return BackwardResult(q, u, tip, SOLVED, it, n_eq, n_fac, fac, error)
-    return BackwardResult(q, u, tip, ITERATION_LIMIT, settings.max_iterations, n_eq, n_fac, fac, error)
+            return BackwardResult(q, u, tip, SOLVED, it, n_eq, n_fac, fac, error, branch)
+    return BackwardResult(q, u, tip, ITERATION_LIMIT, settings.max_iterations, n_eq, n_fac, fac, error, branch)
 
 
 def _equilibrium(model, q, u, u_new, linear, curved=None):
@@ -206,10 +210,14 @@ def _equilibrium(model, q, u, u_new, linear, curved=None):
     with ~3 LUs: it is tried next, and the continuation only if it fails too."""
     guess = q.copy()
     guess[model.free] += linear
+    if not admissible_guess(model, guess):  # a predictor through an inverted element mixes branches
+        guess, curved = q, None
     if curved is None:
         return solve_equilibrium(model, u_new, q0=q, u0=u, guess=guess)
     curved_guess = guess.copy()
     curved_guess[model.free] += curved
+    if not admissible_guess(model, curved_guess):
+        return solve_equilibrium(model, u_new, q0=q, u0=u, guess=guess)
     eq = solve_equilibrium(model, u_new, q0=q, u0=u, guess=curved_guess, continuation=False)
     if eq.status == CONVERGED:
         return eq
@@ -253,4 +261,5 @@ def backward_ipopt(model, target, q, u, settings):
     if eq.status != CONVERGED:
         return BackwardResult(q, u, model.tip(q), FAILED, sol.iterations, 1, eq.factorizations)
     status = SOLVED if sol.success else ITERATION_LIMIT
-    return BackwardResult(eq.q, sol.u, eq.tip, status, sol.iterations, 1, eq.factorizations, eq.factorization)
+    return BackwardResult(eq.q, sol.u, eq.tip, status, sol.iterations, 1, eq.factorizations, eq.factorization,
+                          branch=eq.branch)

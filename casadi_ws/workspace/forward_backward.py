@@ -36,7 +36,7 @@ from ..fem.model import StaticModel
 from ..runtime.executor import Executor, deferred_interrupt, make_executor, one_blas_thread, small_pages
 from ..runtime.run_state import RunState, fingerprint
 from ..solvers.admissible import VIOLATIONS, admissibility, decode
-from ..solvers.equilibrium import CONVERGED, solve_equilibrium, tangent_factorization
+from ..solvers.equilibrium import CONVERGED, Branch, solve_equilibrium, tangent_factorization
 from ..solvers.sensitivity import (TangentProducts, bounded_step, closest_to_box, curvature, distance_below,
                                    input_range, sensitivity)
 from ..status import Status
@@ -176,14 +176,14 @@ def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0, grid=None,
             violations = admissibility(model, res.q, res.u, fac).mask
             if grid is not None and not _on_target(res.tip, target, scale) and grid.index(res.tip) in reached:
                 out.append((res.q, res.u, res.tip, res.status, res.ok, None, None, None, 0, res.equilibrium_solves,
-                            n_fac, violations, None, res.predictor_error))
+                            n_fac, violations, None, res.predictor_error, res.branch))
                 continue
             A_new, S_new, Q_new, G = _derivatives(model, res.q, res.u, fac, scale, bsettings, curved=not passed_on)
             if passed_on:  # the caller has it: not sent back (~0.1 MB an answer on the 4-cable trunk)
                 Q_new, age = None, Q_age + 1
             maps = point_maps(model, res.q, res.u, A_new, fac, G)
         out.append((res.q, res.u, res.tip, res.status, res.ok, A_new, S_new, Q_new, age, res.equilibrium_solves,
-                    n_fac, violations, maps, res.predictor_error))
+                    n_fac, violations, maps, res.predictor_error, res.branch))
     return out
 
 
@@ -195,7 +195,7 @@ def _on_target(tip, target, eta) -> bool:
     return bool(np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9)))
 
 
-_PREFILTERED = (None, None, None, int(Status.PREFILTERED), False, None, None, None, 0, 0, 0, 0, None, None)
+_PREFILTERED = (None, None, None, int(Status.PREFILTERED), False, None, None, None, 0, 0, 0, 0, None, None, 0)
 """A target the prefilter dropped, as :func:`_expand` answers for a target it solved."""
 
 
@@ -324,7 +324,8 @@ class Exploration:
         self.uniform = grid is not None
         self.counters = dict(iterations=0, explored=0, feasible=0, backward_solves=0, equilibrium_solves=0,
                              factorizations=0, not_reached=0, prefiltered=0, backward_failed=0, adopted=0,
-                             inadmissible=0, excluded={n: 0 for n in VIOLATIONS}, stopped_at_max_cells=False)
+                             inadmissible=0, path_dependent=0, excluded={n: 0 for n in VIOLATIONS},
+                             stopped_at_max_cells=False)
         self.timings = {"step1_interval": 0.0, "step2_neighbourhood": 0.0, "step3_backward": 0.0}
         self.bsettings = settings.backward
         if self.bsettings.give_up is None and self.bsettings.formulation == "reduced":
@@ -445,13 +446,15 @@ class Exploration:
         keep_inadmissible = self.problem.admissibility.keep
         for (cfg, todo), out in zip(tasks, answers):
             eta = self.eta(cfg)
-            for (cell, target), (q, u, tip, status, ok, A, S, Q, age, n_eq, n_fac, viol, maps, error) in zip(todo, out):
+            for (cell, target), (q, u, tip, status, ok, A, S, Q, age, n_eq, n_fac, viol, maps, error,
+                                 branch) in zip(todo, out):
                 if status == Status.PREFILTERED:
                     self._fail(target, Status.PREFILTERED)
                     continue
                 self.counters["backward_solves"] += 1
                 self.counters["equilibrium_solves"] += n_eq
                 self.counters["factorizations"] += n_fac
+                self.counters["path_dependent"] += branch == Branch.PATH_DEPENDENT
                 if ok and viol and not keep_inadmissible:
                     # verified but not a state the robot can take: kept apart, never a reached cell; its
                     # neighbours are still explored from the configurations that are admissible
@@ -631,12 +634,13 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
         if settings.step is None:
             settings.step = default_step(model)
         # the budget is not part of the answer: a run stopped by it resumes with a larger one
-        # checkpoint format 9: the seeds' Q (8: the frontier's Q ages; 7: the boundary surface's seeds; 6: the
+        # checkpoint format 10: solves checked for their branch, counted path_dependent (9: the seeds' Q; 8: the
+        # frontier's Q ages; 7: the boundary surface's seeds; 6: the
         # contact map; 5: maps with the actuators' intensities; 4: reached points carry their maps, failures their
         # closest points; 2: frontiers carry Q);
         # an older checkpoint would resume without them and so end with another result than an uninterrupted run
         fp = fingerprint("forward-backward", model, asdict(settings) | {"workers": None, "progress": None,
-                                                                         "max_cells": None, "format": 9})
+                                                                         "max_cells": None, "format": 10})
         run = RunState(checkpoint_dir, "forward-backward", fp, resume, t0)
 
         own = executor is None

@@ -112,6 +112,11 @@ class WorkspaceResult:
             w.append(f"{len(self.arrays.get('excluded_violations', []))} verified equilibria were not admissible and "
                      f"are not reported ({', '.join(f'{k}: {v}' for k, v in excluded.items())}); see "
                      f"result.npz's excluded_* arrays")
+        if self.counters.get("path_dependent"):
+            w.append(f"{self.counters['path_dependent']} equilibria depend on the path the inputs take (the robot "
+                     f"loaded from a neighbouring point and from rest settles differently: buckling, snap-through or "
+                     f"contact that holds); the one reached from rest is reported (docs/methods.md \"One answer per "
+                     f"input\")")
         if self.counters.get("stopped_at_max_cells"):
             w.append(f"the exploration stopped at its budget of {self.settings.get('max_cells')} explored cells "
                      f"(--max-cells): the result holds what was verified so far; the same command with --resume "
