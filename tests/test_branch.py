@@ -1,0 +1,150 @@
+"""One robot, one answer (docs/methods.md "One answer per input"): a reported point is the equilibrium the robot
+reaches by quasi-static loading from rest; Newton stays on its branch; forward's points do not depend on the
+stride or on how the grid is split among workers; forward-backward's points equal the path from rest.
+
+The full grids of every shipped problem, with two worker processes, are `scripts/branch_consistency.py`'s
+(BENCHMARKS.md "One answer per input"); here coarse grids of every shipped problem but the two whose equilibria
+take seconds (`pinch_gripper`, `trunk_2cables_fine`: the script covers them)."""
+
+import importlib
+
+import numpy as np
+import pytest
+
+import casadi_ws as cw
+from casadi_ws import FBSettings, ForwardSettings, StaticModel, forward, forward_backward
+from casadi_ws.solvers.equilibrium import Branch
+
+from conftest import REPO, small_trunk
+
+E = importlib.import_module("casadi_ws.solvers.equilibrium")
+F = importlib.import_module("casadi_ws.workspace.forward")  # (the package's name is the function)
+GUESS = REPO / "tests" / "data" / "trunk_table_crushing_guess.npz"
+"""The first iterate the forward sweep of trunk_table (n_d = 21, Newton at every point) handed Newton at u = (10,
+50) N before this issue's fix, recorded then: det F 0.986 everywhere, yet Newton went on to a crushed tip."""
+
+
+@pytest.fixture(scope="module")
+def table():
+    return StaticModel(cw.load_problem(REPO / "problems" / "trunk_table.yaml"))
+
+
+def test_newton_from_the_crushing_guess_reaches_the_equilibrium_of_the_path_from_rest(table):
+    d = np.load(GUESS)
+    assert table.jacobians(d["guess"]).min() > 0.98 and table.jacobians(d["crushed"]).min() < 0.5
+    eq = cw.solve_equilibrium(table, d["u"], guess=d["guess"])
+    ref = cw.quasi_static(table, d["u"])
+    assert eq.converged and ref.converged
+    assert table.jacobians(eq.q).min() > 0.95
+    assert np.linalg.norm(eq.tip - ref.tip) < 1e-6
+
+
+@pytest.mark.parametrize("guards", ["none", "trust region", "volume kept", "both"])
+def test_each_guard_keeps_newton_off_the_crushed_branch(table, monkeypatch, guards):
+    """Newton alone from the same guess: without the guards it converges on the crushed branch (as it did), though
+    no trial state goes below det F 0.1; with the trust region it reaches the intact state directly, with the
+    volume each element keeps it stops short (the continuation from rest then finds the intact state)."""
+    if guards in ("none", "volume kept"):
+        monkeypatch.setattr(E, "TRUST_REGION", np.inf)
+    if guards in ("none", "trust region"):
+        monkeypatch.setattr(E, "VOLUME_KEPT", 0.0)
+    d = np.load(GUESS)
+    eq = cw.solve_equilibrium(table, d["u"], guess=d["guess"], continuation=False)
+    if guards == "none":
+        assert eq.converged and table.jacobians(eq.q).min() < 0.5
+    else:
+        assert not eq.converged or table.jacobians(eq.q).min() > 0.95
+
+
+def test_polishing_stops_at_round_off(table):
+    """At rest trunk_table's residual cannot go below ~1e-10: asked for 1e-10, Newton stops where it stalls
+    (it took 30 iterations and 18 LUs)."""
+    eq = cw.solve_equilibrium(table, [0.0, 0.0], target=1e-10)
+    assert eq.converged and eq.iterations <= 8 and eq.factorizations <= 3
+
+
+def _in_pieces(model, settings, pieces):
+    """The grid swept in ``pieces`` slices of whole lines (planes where lines are interpolated across), each
+    from rest, as worker processes sweep them (two pieces per worker), here in this process."""
+    us = F.input_grid(model.u_min, model.u_max, settings.n_d)
+    L = settings.n_d
+    unit = L * L if model.n_u >= 2 and F.across_stride(settings, model.n_u, L) > 1 else L
+    tips = []
+    n_units = len(us) // unit
+    for units in np.array_split(np.arange(n_units), min(pieces, n_units)):
+        rows = np.arange(units[0] * unit, (units[-1] + 1) * unit)
+        tips.append(F.sweep(model, us[rows], settings)[0])
+    return np.vstack(tips)
+
+
+COARSE = {  # problem: (n_d, settings that interpolate)
+    "finger_object": (9, dict(stride=2)),
+    "trunk_2cables": (7, dict(stride=3)),
+    "trunk_table": (7, dict(stride=3)),
+    "trunk_2cables_order2": (4, dict(stride=2)),
+    "sofa_trunk_2cables": (7, dict(stride=3)),
+    "pneunet_finger": (4, dict(stride=2)),
+    "trunk_3cables": (4, dict(stride=2, across=2)),
+    "trunk_4cables": (3, dict(stride=2, across=2)),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(COARSE))
+def test_forward_points_do_not_depend_on_the_stride_or_the_workers(name):
+    problem = cw.load_problem(REPO / "problems" / f"{name}.yaml")
+    model = StaticModel(problem)
+    nd, interpolating = COARSE[name]
+    newton = ForwardSettings(n_d=nd, stride=1, across=1, progress=False)
+    runs = [forward(problem, settings=newton, model=model),
+            forward(problem, settings=ForwardSettings(n_d=nd, progress=False, **interpolating), model=model)]
+    assert runs[1].counters["interpolated"] > 0  # the second run does interpolate
+    for r in runs:
+        assert r.n_failed == 0 and not len(r.arrays["excluded_violations"]) and r.n_points == nd**problem.n_u
+        np.testing.assert_array_equal(r.u, runs[0].u)
+        assert np.abs(r.points - runs[0].points).max() < 1e-6
+    # the grid in the two slices one worker of two sweeps, each from rest
+    assert np.abs(_in_pieces(model, newton, 2) - runs[0].points).max() < 1e-6
+    # and the equilibrium the robot reaches from rest, at the grid's far corner
+    ref = cw.quasi_static(model, runs[0].u[-1])
+    assert ref.converged and np.linalg.norm(runs[0].points[-1] - ref.tip) < 1e-6
+
+
+def test_forward_on_trunk_table_with_newton_everywhere_takes_few_lus_and_excludes_nothing(table):
+    """The issue's case on a coarser grid (n_d = 11): Newton at every point took 11.1 LUs per point (17.9 at
+    n_d = 21, with points on a crushed branch); now 3.0, none excluded, every tip the path from rest's."""
+    r = forward(table.problem, settings=ForwardSettings(n_d=11, stride=1, progress=False), model=table)
+    assert r.n_failed == 0 and not len(r.arrays["excluded_violations"])
+    assert r.counters["factorizations"] / r.counters["points"] < 4
+    for i in range(0, len(r.u), 30):
+        ref = cw.quasi_static(table, r.u[i])
+        assert np.linalg.norm(r.points[i] - ref.tip) < 1e-6
+
+
+def test_forward_backward_points_equal_the_path_from_rest():
+    pb = small_trunk("corotational", n_cables=2)
+    model = StaticModel(pb)
+    fb = forward_backward(pb, FBSettings(step=0.008, progress=False), model=model)
+    assert fb.counters["path_dependent"] == 0
+    for i in np.linspace(0, fb.n_points - 1, 8).round().astype(int):
+        ref = cw.quasi_static(model, fb.u[i])
+        assert ref.converged and np.linalg.norm(fb.points[i] - ref.tip) < 1e-6
+
+
+def test_a_jump_to_another_branch_is_caught_and_the_path_from_rest_reported(table):
+    """Newton from the crushing guess, as if the guess came from a neighbour at u = (10, 45) and the guards were
+    off: the answer is on a crushed branch, the midpoint test fails, the path from the neighbour and the path
+    from rest reach the intact state, which is reported (Branch.PATH_REPLACED)."""
+    d = np.load(GUESS)
+    start = cw.quasi_static(table, [10.0, 45.0])
+    orig = E.TRUST_REGION, E.VOLUME_KEPT
+    E.TRUST_REGION, E.VOLUME_KEPT = np.inf, 0.0
+    try:
+        res = E._newton(table, d["u"], d["guess"], 1.0, 1e-8, 30, None)
+    finally:
+        E.TRUST_REGION, E.VOLUME_KEPT = orig
+    assert res.status == E.CONVERGED and table.jacobians(res.q).min() < 0.5
+    checked, code, _ = E._check_branch(table, res, (start.q, start.u, 1.0), d["u"], 1e-8, 30, 64)
+    assert code == Branch.PATH_REPLACED
+    ref = cw.quasi_static(table, d["u"])
+    assert np.linalg.norm(table.tip(checked.q) - ref.tip) < 1e-6
