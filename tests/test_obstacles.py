@@ -64,3 +64,23 @@ def test_bad_obstacles_are_one_line(tmp_path, obstacle, message):
     with pytest.raises(ProblemError) as exc:
         problem_from_dict({**BASE, "obstacles": [obstacle]}, "p.yaml", tmp_path)
     assert message in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_a_problem_with_a_surface_obstacle_still_pickles_once_its_model_is_built():
+    """Forward-backward on worker processes pickles the problem (and fingerprints it) after the model is built;
+    the finger under the egg failed there with "cannot pickle 'AABB' object" (libigl's tree, a cache)."""
+    import pickle
+
+    from casadi_ws import StaticModel, load_problem
+    from casadi_ws.runtime.run_state import problem_fingerprint
+
+    from conftest import REPO
+
+    problem = load_problem(REPO / "problems" / "finger_object.yaml")
+    before = problem_fingerprint(problem)
+    model = StaticModel(problem)
+    model.residual(np.zeros(model.n_dof), np.zeros(model.n_u))  # builds the egg's trees
+    assert problem_fingerprint(problem) == before
+    again = pickle.loads(pickle.dumps(problem))
+    x = np.array([[0.0, 0.0, 0.0], [0.5, 0.5, 0.5]])
+    np.testing.assert_array_equal(again.obstacles[0].gap(x)[0], problem.obstacles[0].gap(x)[0])

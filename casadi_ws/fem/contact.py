@@ -31,6 +31,11 @@ class Obstacle:
     """plane: point, normal (unit); box: lower, upper; sphere: center, radius; cylinder: a, b (axis end
     points), radius; surface: vertices, triangles (closed, outward normals)."""
 
+    def __getstate__(self):
+        # libigl's trees of a surface, built on first use (:meth:`_surface_gap`), are caches, not the obstacle:
+        # they do not pickle, and a problem sent to worker processes (or fingerprinted) must not depend on them
+        return {k: v for k, v in self.__dict__.items() if not k.startswith("_")}
+
     def distance(self, x: np.ndarray) -> np.ndarray:
         """Signed distance (k,) of the points x (k, 3): positive outside the obstacle."""
         x = np.atleast_2d(np.asarray(x, dtype=float))
