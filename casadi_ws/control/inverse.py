@@ -32,7 +32,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..solvers.equilibrium import CONVERGED, admissible_guess, solve_equilibrium, tangent_factorization
+from ..solvers.equilibrium import (CONVERGED, Equilibrium, admissible_guess, settle, solve_equilibrium,
+                                   tangent_factorization)
 from ..solvers.sensitivity import applied_step, bounded_step, input_range, sensitivity
 from ..workspace.backward import _within_limits
 from ..status import Status
@@ -250,6 +251,9 @@ def _reduced(model, W, targets, q, u, settings: ReachSettings, u_ref, u_box=None
         fac = eq.factorization if eq.factorization is not None else tangent_factorization(model, q, u)
     if not moved_once and status == Status.SOLVE_FAILED:
         q, u = start_q, start_u
+    elif q is not start_q:  # contact that can hold the body in more than one way: the path from rest decides
+        settled = settle(model, Equilibrium(q, u, model.tip(q), CONVERGED, 0, 0, 0.0, 0, fac), start_q)
+        q, fac = settled.q, settled.factorization
     tip = model.tip(q)
     err = float(np.linalg.norm(tip - targets[0]))
     adm = admissibility(model, q, u, fac)

@@ -151,6 +151,14 @@ class ContactTerm(Term):
         vals = np.concatenate([-kap * val, fb[2][pt] * kap * val, kap * fb[1], -lam[cp] * d2g])
         return keys, vals
 
+    @property
+    def multistable(self) -> np.ndarray:
+        """(k,) bool: the points whose contact can hold the body in one of several equilibria at the same
+        inputs: the region such a point may occupy is not convex (outside a curved or faceted obstacle, or
+        the body itself), so which points press can depend on the path (docs/methods.md "One answer per
+        input"). Outside a plane it is a half-space: one equilibrium whatever the path."""
+        return np.ones(self.n_rows, dtype=bool)
+
     def contact_forces(self, model, q) -> np.ndarray:
         """sum_i lambda_i dg_i/dq on the free dofs."""
         geo = self.geometry(model, q)
@@ -246,6 +254,11 @@ class ObstacleContact(ContactTerm):
         e1, e2 = self._cp
         d2g = w[e1] * w[e2] * H[pt[e1], coord[e1], coord[e2]]
         return ContactGeometry(g, nrm, (pt, fpos, w * nrm[pt, coord]), (pt[e1], fpos[e1], fpos[e2], d2g), self._cp)
+
+    @property
+    def multistable(self) -> np.ndarray:
+        planes = np.array([ob.kind == "plane" for ob in self.contact.obstacles], dtype=bool)
+        return ~planes[self.contact.obstacle]
 
     def report(self, model, q) -> list[dict]:
         """Per obstacle: name, kind, the force [fx, fy, fz] (N) it exerts, points pressing, penetration (m)."""

@@ -446,13 +446,16 @@ def stable_branch(model, q: np.ndarray, u: np.ndarray, mode: np.ndarray, tol: fl
 
 
 def admissible_equilibrium(model, u, **kwargs):
-    """:func:`.equilibrium.solve_equilibrium`, then every admissibility check; an unstable equilibrium is
+    """:func:`.equilibrium.solve_equilibrium` (settled on the path from rest where contact could hold the body in
+    more than one way: :func:`.equilibrium.settle`), then every admissibility check; an unstable equilibrium is
     replaced by a stable one at the same u where :func:`stable_branch` finds it (a column loaded above its
     buckling load comes out buckled). Returns (Equilibrium, Admissibility or None if not converged,
     whether the stable branch was taken)."""
-    from .equilibrium import solve_equilibrium
+    from .equilibrium import settle, solve_equilibrium
 
     eq = solve_equilibrium(model, u, **kwargs)
+    q0 = kwargs.get("q0")
+    eq = settle(model, eq, np.zeros(model.n_dof) if q0 is None else q0)  # where contact could hold it two ways
     if not eq.converged:
         return eq, None, False
     adm = admissibility(model, eq.q, eq.u, eq.factorization)

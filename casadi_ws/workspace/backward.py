@@ -25,7 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..solvers.equilibrium import CONVERGED, Factorization, admissible_guess, solve_equilibrium, tangent_factorization
+from ..solvers.equilibrium import (CONVERGED, Equilibrium, Factorization, admissible_guess, settle, solve_equilibrium,
+                                   tangent_factorization)
 from ..solvers.sensitivity import (applied_step, bounded_step, closest_to_box, input_range, limited_step, second_order,
                                    sensitivity)
 from ..status import Status
@@ -142,10 +143,26 @@ def backward(model, target, q, u, fac: Factorization | None = None, scale: float
     """
     settings = settings or BackwardSettings()
     if settings.formulation == "reduced":
-        return _reduced(model, np.asarray(target, float), q, np.asarray(u, float), fac, scale, settings, sens)
-    if settings.formulation == "ipopt":
-        return backward_ipopt(model, np.asarray(target, float), q, np.asarray(u, float), settings)
-    raise ValueError(f"unknown backward formulation {settings.formulation!r}; expected 'reduced' or 'ipopt'")
+        res = _reduced(model, np.asarray(target, float), q, np.asarray(u, float), fac, scale, settings, sens)
+    elif settings.formulation == "ipopt":
+        res = backward_ipopt(model, np.asarray(target, float), q, np.asarray(u, float), settings)
+    else:
+        raise ValueError(f"unknown backward formulation {settings.formulation!r}; expected 'reduced' or 'ipopt'")
+    return _settled(model, res, q)
+
+
+def _settled(model, res: BackwardResult, q_start) -> BackwardResult:
+    """The answer made the path from rest's where its contact may hold it in another equilibrium than the one
+    the start's neighbourhood leads to (:func:`casadi_ws.solvers.equilibrium.settle`)."""
+    if not res.ok or res.q is q_start:
+        return res
+    eq = Equilibrium(res.q, res.u, res.tip, CONVERGED, 0, 0, 0.0, 0, res.fac, res.branch)
+    out = settle(model, eq, q_start)
+    res.factorizations += out.factorizations - (0 if out is eq else eq.factorizations)
+    if out is not eq:
+        res.q, res.tip, res.fac, res.branch = out.q, out.tip, out.factorization, out.branch
+        res.equilibrium_solves += 1
+    return res
 
 
 def _reduced(model, target, q, u, fac, scale, settings, sens=None) -> BackwardResult:

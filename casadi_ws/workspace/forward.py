@@ -30,7 +30,7 @@ from ..runtime.executor import Executor, deferred_interrupt, make_executor, one_
 from ..runtime.run_state import RunState, fingerprint
 from ..solvers.admissible import VIOLATIONS, admissibility, encode
 from ..solvers.equilibrium import (CONVERGED, OUTSIDE_BOUNDS, Branch, Equilibrium, admissible_guess, inside_bounds,
-                                   newton_krylov, solve_equilibrium, tangent_factorization, verify)
+                                   newton_krylov, settle, solve_equilibrium, tangent_factorization, verify)
 from ..solvers.sensitivity import sensitivity
 from .maps import MAPS, point_maps, state_maps
 from .result import WorkspaceResult, describe
@@ -248,6 +248,7 @@ def _solve_point(model, u, j, settings, tol, sw: _Sweep, counters):
         q0, u0 = (None, None) if sw.start is None else sw.start
         eq = solve_equilibrium(model, u, q0=q0, u0=u0, tol=tol, max_iter=settings.max_iter,
                                target=_POLISH * tol)
+    eq = settle(model, eq, np.zeros(model.n_dof) if q0 is None else q0)
     _count(counters, eq)
     if eq.status == CONVERGED:
         sw.history = (sw.history + [(u.copy(), eq.q)])[-_HISTORY:]
@@ -328,16 +329,23 @@ def _solve_line(model, us, first, settings, tol, sw: _Sweep, counters):
         guess = polynomial_guess(model, x[near], [out[k].q for k in near], x[j])
         eq = verify(model, us[j], guess, tol)
         counters["interpolated"] += 1
+        k = near[0]
         if eq.status != CONVERGED:  # interpolation not good enough here: Newton from it
             counters["interpolation_failed"] += 1
-            k = near[0]
             # polished like a Newton point: it becomes one of the nodes of the points after it
             eq = solve_equilibrium(model, us[j], q0=out[k].q, u0=us[k], guess=guess, tol=tol,
                                    max_iter=settings.max_iter, target=_POLISH * tol)
+            eq = settle(model, eq, out[k].q)
             eq.newton = True
             _count(counters, eq)
             if eq.status == CONVERGED:  # failures cluster: the points after it interpolate from it too
                 solved = np.append(solved, j)
+        else:
+            settled = settle(model, eq, out[k].q)
+            if settled is not eq:  # the path from rest's, checked like a Newton point (and counted)
+                eq = settled
+                eq.newton = True
+                _count(counters, eq)
         out[j] = eq
     tried = n - len(newton)
     failed = counters["interpolation_failed"] - failed_before
@@ -427,7 +435,7 @@ def _across(model, u, x, nodes, eqs, masks, maps, settings, tol, counters):
     """One point between Newton lines, at ``x`` on the across axis: the polynomial through the nearest
     ``nodes`` [(x_k, point index)], verified (Newton from it otherwise); then its checks and maps."""
     if not nodes:
-        eq = solve_equilibrium(model, u, tol=tol, max_iter=settings.max_iter)
+        eq = settle(model, solve_equilibrium(model, u, tol=tol, max_iter=settings.max_iter), np.zeros(model.n_dof))
         _count(counters, eq)
         eq.newton = True
         return eq, *_own_checks(model, eq)
@@ -436,10 +444,14 @@ def _across(model, u, x, nodes, eqs, masks, maps, settings, tol, counters):
     guess = polynomial_guess(model, xs, [eqs[k].q for _, k in nodes], x)
     eq = verify(model, u, guess, tol)
     counters["interpolated"] += 1
+    k, solved = nodes[0][1], False
     if eq.status != CONVERGED:
         counters["interpolation_failed"] += 1
-        k = nodes[0][1]
         eq = solve_equilibrium(model, u, q0=eqs[k].q, u0=eqs[k].u, guess=guess, tol=tol, max_iter=settings.max_iter)
+        solved = True
+    settled = settle(model, eq, eqs[k].q)
+    if solved or settled is not eq:
+        eq = settled
         _count(counters, eq)
         eq.newton = True
         return eq, *_own_checks(model, eq)
