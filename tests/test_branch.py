@@ -148,3 +148,24 @@ def test_a_jump_to_another_branch_is_caught_and_the_path_from_rest_reported(tabl
     assert code == Branch.PATH_REPLACED
     ref = cw.quasi_static(table, d["u"])
     assert np.linalg.norm(table.tip(checked.q) - ref.tip) < 1e-6
+
+
+def test_where_the_finger_can_rest_on_the_egg_in_two_ways_the_path_from_rest_decides():
+    """At a shortening of 17.5 mm the finger's tip rests against the (faceted) egg at one point or at two, 0.8 mm
+    apart, both stable, depending on the steps it was loaded by. A method's answer whose pressing points differ
+    from its neighbour's is compared with quasi_static from rest, which it becomes, counted path-dependent."""
+    from casadi_ws.solvers.admissible import admissibility
+    from casadi_ws.solvers.equilibrium import settle
+
+    m = StaticModel(cw.load_problem(REPO / "problems" / "finger_object.yaml"))
+    u = np.array([0.0175])
+    rest_path = cw.quasi_static(m, u)
+    others = (cw.quasi_static(m, u, max_step=s) for s in (0.02, 0.04, 0.01, 0.05, 0.03))
+    other = next(o for o in others if o.converged and E._apart(m, o.q, rest_path.q) > 0.01)
+    for eq in (rest_path, other):
+        assert eq.converged and admissibility(m, eq.q, u).admissible
+    assert np.linalg.norm(other.tip - rest_path.tip) > 1e-4
+    rest = np.zeros(m.n_dof)  # nothing presses at rest: both answers are checked
+    settled = settle(m, other, rest)
+    assert settled.branch == Branch.PATH_DEPENDENT and np.linalg.norm(settled.tip - rest_path.tip) < 1e-9
+    assert settle(m, rest_path, rest) is rest_path
