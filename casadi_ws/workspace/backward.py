@@ -152,12 +152,12 @@ def backward(model, target, q, u, fac: Factorization | None = None, scale: float
 
 
 def _settled(model, res: BackwardResult, q_start) -> BackwardResult:
-    """The answer made the path from rest's where its contact may hold it in another equilibrium than the one
-    the start's neighbourhood leads to (:func:`casadi_ws.solvers.equilibrium.settle`)."""
+    """The answer made the path from rest's wherever its contact could hold it in another equilibrium
+    (:func:`casadi_ws.solvers.equilibrium.settle`, every answer where such points press)."""
     if not res.ok or res.q is q_start:
         return res
     eq = Equilibrium(res.q, res.u, res.tip, CONVERGED, 0, 0, 0.0, 0, res.fac, res.branch)
-    out = settle(model, eq, q_start)
+    out = settle(model, eq, None)
     res.factorizations += out.factorizations - (0 if out is eq else eq.factorizations)
     if out is not eq:
         res.q, res.tip, res.fac, res.branch = out.q, out.tip, out.factorization, out.branch
