@@ -70,7 +70,7 @@ def forward_sampler(problem, n_d, n_lines, seed=0):
             sweep(model, lines[0], settings)
             t_first = time.perf_counter() - t0
             t0 = time.perf_counter()
-            status = sweep(model, np.vstack(lines), settings)[1]
+            status = sweep(model, np.vstack(lines), settings).status
             t_all = time.perf_counter() - t0
         points = n_lines * n_d
         return (t_all - t_first) / points, points, int(np.sum(status[n_d:] != 0))

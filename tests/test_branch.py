@@ -73,7 +73,7 @@ def _in_pieces(model, settings, pieces):
     n_units = len(us) // unit
     for units in np.array_split(np.arange(n_units), min(pieces, n_units)):
         rows = np.arange(units[0] * unit, (units[-1] + 1) * unit)
-        tips.append(F.sweep(model, us[rows], settings)[0])
+        tips.append(F.sweep(model, us[rows], settings).tips)
     return np.vstack(tips)
 
 

@@ -153,12 +153,12 @@ def test_checkpoints_survive_failed_points_and_resume_to_the_same_sweep():
     us = input_grid(pb.u_min, pb.u_max, 4)
     saved = []
     ref = sweep(m, us, s, checkpoint=lambda st: saved.append(st))  # a checkpoint after every grid line
-    assert (ref[1] != 0).any() and len(saved) == len(us) // 4
+    assert (ref.status != 0).any() and len(saved) == len(us) // 4
     assert any(len(st["hist_u"]) == 0 for st in saved)  # states right after a failure are saved too
     mid = saved[len(saved) // 2 - 1]
     again = sweep(m, us, s, resume=dict(mid))
-    np.testing.assert_array_equal(again[1], ref[1])
-    assert np.nanmax(np.abs(again[0] - ref[0])) < 1e-8
+    np.testing.assert_array_equal(again.status, ref.status)
+    assert np.nanmax(np.abs(again.tips - ref.tips)) < 1e-8
 
 
 @pytest.mark.parametrize("n_u, n_d, stride", [(1, 41, 4), (2, 21, 4), (1, 9, 8)])
@@ -311,5 +311,5 @@ def test_lines_and_planes_interpolated_across_match_the_lines_solved_one_by_one(
     full = sweep(m, us, s, checkpoint=lambda st: saved.append(st))
     assert len(saved) == 9 and all(st["next"] % 81 == 0 for st in saved)  # a checkpoint per plane
     again = sweep(m, us, s, resume=dict(saved[2]))
-    np.testing.assert_array_equal(again[1], full[1])
-    assert np.nanmax(np.abs(again[0] - full[0])) < 1e-8
+    np.testing.assert_array_equal(again.status, full.status)
+    assert np.nanmax(np.abs(again.tips - full.tips)) < 1e-8

@@ -35,7 +35,7 @@ from ..solvers.sensitivity import sensitivity
 from .maps import MAPS, point_maps, state_maps
 from .result import WorkspaceResult, describe
 
-__all__ = ["CUBE_STATES", "ForwardSettings", "across_planes", "across_stride", "forward", "input_grid",
+__all__ = ["CUBE_STATES", "ForwardSettings", "SweepResult", "across_planes", "across_stride", "forward", "input_grid",
            "lagrange_weights", "line_stride", "new_counters", "snake_order", "sweep"]
 
 
@@ -214,6 +214,41 @@ def new_counters() -> dict:
     return dict(solves=0, newton_iterations=0, factorizations=0, load_steps=0, restarts=0, krylov_iterations=0,
                 interpolated=0, interpolation_failed=0, branch_checks=0, branch_paths=0, branch_replaced=0,
                 path_dependent=0)
+
+
+@dataclass
+class SweepResult:
+    """The points of a sweep (or of a piece of the grid), in the order of its inputs."""
+
+    tips: np.ndarray
+    """(n, 3) end-effector positions (NaN where a point failed)."""
+    status: np.ndarray
+    """(n,) :class:`casadi_ws.status.Status` codes (0: verified)."""
+    residual: np.ndarray
+    """(n,) relative residuals."""
+    violations: np.ndarray
+    """(n,) admissibility masks (0: admissible)."""
+    maps: np.ndarray
+    """(n, len(MAPS) + 2 n_u): the point maps, then each actuator's state and intensity."""
+    states: np.ndarray | None
+    """(n, n_dof) nodal displacements where kept (``ForwardSettings.store_states``), else None."""
+    counters: dict
+    """:func:`new_counters`' counters of the points' solves."""
+
+    ARRAYS = ("tips", "status", "residual", "violations", "maps", "states")
+    """The per-point arrays, by name (checkpoints store them so)."""
+
+    def __len__(self) -> int:
+        return len(self.tips)
+
+    @classmethod
+    def concatenate(cls, parts: list["SweepResult"]) -> "SweepResult":
+        """The pieces one after the other; their counters summed."""
+        states = [p.states for p in parts]
+        return cls(np.vstack([p.tips for p in parts]), np.concatenate([p.status for p in parts]),
+                   np.concatenate([p.residual for p in parts]), np.concatenate([p.violations for p in parts]),
+                   np.vstack([p.maps for p in parts]), None if any(x is None for x in states) else np.vstack(states),
+                   {k: sum(p.counters[k] for p in parts) for k in parts[0].counters})
 
 
 def _count(counters, eq):
@@ -488,9 +523,9 @@ def _own_checks(model, eq):
 
 
 def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progress=None,
-           resume: dict | None = None, checkpoint=None, line_length: int | None = None):
+           resume: dict | None = None, checkpoint=None, line_length: int | None = None) -> SweepResult:
     """Solve the equilibria at ``us`` (whole grid lines of ``line_length`` points, default n_d, in sweep
-    order); returns per-point arrays and counters.
+    order); returns their :class:`SweepResult`.
 
     ``checkpoint`` (if given) is called with the sweep's state every ``settings.checkpoint_every`` seconds
     (at the end of a line) and on Ctrl-C; passing such a state back as ``resume`` continues where it stopped.
@@ -572,7 +607,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
         if checkpoint is not None:
             checkpoint(state(done))
         raise
-    return tips, status, residual, violations, maps, states, counters
+    return SweepResult(tips, status, residual, violations, maps, states, counters)
 
 
 def _sweep_job(model, us, settings):
@@ -628,15 +663,13 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
                 run.save({"next": st["next"], "counters": st["counters"]},
                          {k: v for k, v in st.items() if k not in ("next", "counters")})
 
-            tips, status, residual, violations, maps, states, counters = sweep(
-                model, us, settings, progress=bar.update if bar else None, resume=resume_state,
-                checkpoint=checkpoint if checkpoint_dir is not None else None)
+            swept = sweep(model, us, settings, progress=bar.update if bar else None, resume=resume_state,
+                          checkpoint=checkpoint if checkpoint_dir is not None else None)
         else:  # pieces of the grid run by the executor (this process's for the cube on one worker)
             own = executor is None
             executor = executor or make_executor(workers, model, problem)
             try:
-                tips, status, residual, violations, maps, states, counters = (_cube if cube else _parallel)(
-                    problem, us, settings, workers, bar, run, executor)
+                swept = (_cube if cube else _parallel)(problem, us, settings, workers, bar, run, executor)
             finally:
                 if own:
                     executor.close()
@@ -646,6 +679,9 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
     t_sweep = time.perf_counter() - t1
     run.finish()
 
+    tips, status, residual, violations, maps, states = (swept.tips, swept.status, swept.residual, swept.violations,
+                                                        swept.maps, swept.states)
+    counters = swept.counters
     converged = status == CONVERGED
     excluded = converged & (violations != 0) & (not problem.admissibility.keep)
     ok = converged & ~excluded
@@ -666,7 +702,7 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
         settings={**asdict(settings), "workers": workers}, problem=describe(problem, model), rest_tip=model.p0)
 
 
-def _parallel(problem, us, settings, workers, bar, run: RunState, executor: Executor):
+def _parallel(problem, us, settings, workers, bar, run: RunState, executor: Executor) -> SweepResult:
     """Slices of whole grid lines, several per worker; each completed slice is checkpointed."""
     L = settings.n_d
     # whole planes where lines are interpolated across them (see sweep), else whole lines
@@ -675,25 +711,19 @@ def _parallel(problem, us, settings, workers, bar, run: RunState, executor: Exec
     # two pieces per worker: each starts cold (~1 s of continuation from rest), so more cost more
     pieces = [np.arange(units[0] * unit, (units[-1] + 1) * unit)
               for units in np.array_split(np.arange(n_units), min(n_units, 2 * workers))]
-    results = [None] * len(pieces)
+    results: list[SweepResult | None] = [None] * len(pieces)
     if run.saved is not None:
         saved_meta, saved = run.saved
         for i, c in saved_meta.get("pieces", {}).items():
             i = int(i)
-            results[i] = (saved[f"tips_{i}"], saved[f"status_{i}"], saved[f"residual_{i}"],
-                          saved[f"violations_{i}"], saved[f"maps_{i}"], saved.get(f"states_{i}"), c)
+            results[i] = SweepResult(*(saved.get(f"{name}_{i}") for name in SweepResult.ARRAYS), c)
             if bar is not None:
                 bar.update(len(pieces[i]))
 
     def checkpoint():
-        arrays = {}
-        for i, r in enumerate(results):
-            if r is not None:
-                arrays.update({f"tips_{i}": r[0], f"status_{i}": r[1], f"residual_{i}": r[2],
-                               f"violations_{i}": r[3], f"maps_{i}": r[4]})
-                if r[5] is not None:
-                    arrays[f"states_{i}"] = r[5]
-        run.save({"pieces": {i: r[6] for i, r in enumerate(results) if r is not None}}, arrays)
+        arrays = {f"{name}_{i}": getattr(r, name) for i, r in enumerate(results) if r is not None
+                  for name in SweepResult.ARRAYS if getattr(r, name) is not None}
+        run.save({"pieces": {i: r.counters for i, r in enumerate(results) if r is not None}}, arrays)
 
     todo = [i for i in range(len(pieces)) if results[i] is None]
     for k, r in executor.map_unordered(_sweep_job, problem, [(us[pieces[i]], settings) for i in todo]):
@@ -701,14 +731,10 @@ def _parallel(problem, us, settings, workers, bar, run: RunState, executor: Exec
         checkpoint()
         if bar is not None:
             bar.update(len(pieces[todo[k]]))
-    tips = np.vstack([r[0] for r in results])
-    status = np.concatenate([r[1] for r in results])
-    residual = np.concatenate([r[2] for r in results])
-    violations = np.concatenate([r[3] for r in results])
-    maps = np.vstack([r[4] for r in results])
-    states = np.vstack([r[5] for r in results]) if settings.store_states else None
-    counters = {k: sum(r[6][k] for r in results) for k in results[0][6]}
-    return tips, status, residual, violations, maps, states, counters
+    out = SweepResult.concatenate(results)
+    if not settings.store_states:
+        out.states = None
+    return out
 
 
 CUBE_STATES = 1 << 30
@@ -731,7 +757,7 @@ def _plane_rows(planes, P: int) -> np.ndarray:
     return np.concatenate([np.arange(i * P, (i + 1) * P) for i in planes])
 
 
-def _cube(problem, us, settings, workers, bar, run: RunState, executor: Executor):
+def _cube(problem, us, settings, workers, bar, run: RunState, executor: Executor) -> SweepResult:
     """Three actuators: the grid is one cube of n_d planes (the first actuator fixed in each). Phase 1
     sweeps every ``across``-th plane (and the last) as planes are swept elsewhere (lines solved and
     interpolated across lines), keeping their states; phase 2 interpolates the planes between across the
@@ -740,7 +766,7 @@ def _cube(problem, us, settings, workers, bar, run: RunState, executor: Executor
     points from all along it (six solved planes of fifteen left residuals ~1e-7 against eight of thirty's
     ~1e-9), so the cube is not cut into slabs: each phase is split over the workers (two pieces per
     worker). Each finished piece is checkpointed, the solved planes with their states, so a resumed run
-    interpolates from the same planes. Returns per-point arrays in grid order and counters."""
+    interpolates from the same planes. Returns the points in grid order."""
     L = settings.n_d
     P = L * L
     x = us[::P, 0]
@@ -751,18 +777,19 @@ def _cube(problem, us, settings, workers, bar, run: RunState, executor: Executor
     # contiguous split would leave one worker most of the Newton solves), each sent the solved planes' states
     split = [list(g) for g in np.array_split(newton, min(len(newton), 2 * workers))]
     pieces = [("n", g) for g in split] + [("b", between[k::workers]) for k in range(min(workers, len(between)))]
-    results: dict[int, tuple] = {}
+    results: dict[int, SweepResult] = {}
     if run.saved is not None:
         meta, saved = run.saved
         for k, c in meta.get("pieces", {}).items():
             k = int(k)
-            results[k] = tuple(saved.get(f"{name}_{k}") for name in _PIECE_ARRAYS) + (c,)
+            results[k] = SweepResult(*(saved.get(f"{name}_{k}") for name in SweepResult.ARRAYS), c)
             if bar is not None:
                 bar.update(len(pieces[k][1]) * P)
 
     def checkpoint():
-        arrays = {f"{name}_{k}": a for k, r in results.items() for name, a in zip(_PIECE_ARRAYS, r) if a is not None}
-        run.save({"pieces": {k: r[-1] for k, r in results.items()}}, arrays)
+        arrays = {f"{name}_{k}": getattr(r, name) for k, r in results.items() for name in SweepResult.ARRAYS
+                  if getattr(r, name) is not None}
+        run.save({"pieces": {k: r.counters for k, r in results.items()}}, arrays)
 
     def run_phase(kind, make_job, fn):
         todo = [k for k, (kd, _) in enumerate(pieces) if kd == kind and k not in results]
@@ -770,46 +797,58 @@ def _cube(problem, us, settings, workers, bar, run: RunState, executor: Executor
             results[todo[i]] = r
             checkpoint()
             if bar is not None:
-                bar.update(len(r[0]))
+                bar.update(len(r))
 
     solve = replace(settings, store_states=True)  # phase 2 interpolates from the solved planes' states
     run_phase("n", lambda g: (us[_plane_rows(g, P)], solve), _sweep_job)
     solved = [k for k, (kd, _) in enumerate(pieces) if kd == "n"]
     node_planes = [i for k in solved for i in pieces[k][1]]
-    node = {name: np.concatenate([results[k][a] for k in solved]) for a, name in enumerate(_PIECE_ARRAYS)
-            if name in ("status", "violations", "maps", "states")}
+    node = SweepResult.concatenate([results[k] for k in solved])
     node_of = {i: n for n, i in enumerate(node_planes)}
     at = 0
     for k in solved:  # one copy of the states: the checkpoint's pieces view the nodes' array
-        m = len(results[k][0])
-        results[k] = results[k][:5] + (node["states"][at:at + m],) + results[k][6:]
+        m = len(results[k])
+        results[k] = replace(results[k], states=node.states[at:at + m])
         at += m
 
     def between_job(g):
         # the solved planes the pieces' planes interpolate from (the eight nearest of each), and only those
         nearest = (sorted(node_planes, key=lambda j: abs(x[j] - x[i]))[:_INTERPOLATION_POINTS] for i in g)
         near = sorted(set().union(*nearest), key=node_of.get)
-        if len(near) == len(node_planes):  # all of them (the usual case): no copy of the states
-            return (us[_plane_rows(g, P)], x[g], x[near], us[_plane_rows(near, P)], node["states"], node["status"],
-                    node["violations"], node["maps"], settings)
-        rows = np.concatenate([np.arange(node_of[j] * P, (node_of[j] + 1) * P) for j in near])
-        return (us[_plane_rows(g, P)], x[g], x[near], us[_plane_rows(near, P)], node["states"][rows],
-                node["status"][rows], node["violations"][rows], node["maps"][rows], settings)
+        rows = slice(None) if len(near) == len(node_planes) else \
+            np.concatenate([np.arange(node_of[j] * P, (node_of[j] + 1) * P) for j in near])  # (usually all: no copy)
+        return (_Between(us[_plane_rows(g, P)], x[g], x[near], us[_plane_rows(near, P)], node.states[rows],
+                         node.status[rows], node.violations[rows], node.maps[rows], settings),)
 
     run_phase("b", between_job, _between_job)
-    out = [np.full((len(us), 3), np.nan), np.zeros(len(us), dtype=int), np.zeros(len(us)),
-           np.zeros(len(us), dtype=np.int64), np.full((len(us), len(MAPS) + 2 * problem.n_u), np.nan),
-           np.zeros((len(us), node["states"].shape[1])) if settings.store_states else None]
+    n = len(us)
+    out = SweepResult(np.full((n, 3), np.nan), np.zeros(n, dtype=int), np.zeros(n), np.zeros(n, dtype=np.int64),
+                      np.full((n, len(MAPS) + 2 * problem.n_u), np.nan),
+                      np.zeros((n, node.states.shape[1])) if settings.store_states else None,
+                      {c: sum(r.counters[c] for r in results.values()) for c in results[0].counters})
     for k, (_, g) in enumerate(pieces):
         rows = _plane_rows(g, P)
-        for a, arr in enumerate(out):
-            if arr is not None:
-                arr[rows] = results[k][a]
-    counters = {c: sum(r[-1][c] for r in results.values()) for c in results[0][-1]}
-    return (*out, counters)
+        for name in SweepResult.ARRAYS:
+            if getattr(out, name) is not None:
+                getattr(out, name)[rows] = getattr(results[k], name)
+    return out
 
 
-_PIECE_ARRAYS = ("tips", "status", "residual", "violations", "maps", "states")
+@dataclass
+class _Between:
+    """Phase 2 of :func:`_cube` for some planes: their inputs, and the solved planes they interpolate from."""
+
+    us: np.ndarray
+    x_planes: np.ndarray
+    """The first actuator's input of each plane to interpolate."""
+    x_nodes: np.ndarray
+    """... of each solved plane sent."""
+    us_nodes: np.ndarray
+    q_nodes: np.ndarray
+    status_nodes: np.ndarray
+    masks_nodes: np.ndarray
+    maps_nodes: np.ndarray
+    settings: ForwardSettings
 
 
 class _Nodes:
@@ -824,25 +863,26 @@ class _Nodes:
         return SimpleNamespace(q=self.q[i], u=self.u[i])
 
 
-def _between_job(model, us, x_planes, x_nodes, us_nodes, q_nodes, status_nodes, masks_nodes, maps_nodes, settings):
+def _between_job(model, job: _Between) -> SweepResult:
     """Phase 2 of :func:`_cube` for some planes between solved ones: every point the polynomial across the
     solved planes at the same inputs of the other two actuators, verified, checked (:func:`_across`)."""
+    settings, us = job.settings, job.us
     tol = model.problem.solver.tolerance if settings.tol is None else settings.tol
     counters = new_counters()
-    P = len(us) // len(x_planes)
+    P = len(us) // len(job.x_planes)
     at: dict[bytes, list] = {}
-    for n in np.flatnonzero(status_nodes == CONVERGED):
-        at.setdefault(us_nodes[n, 1:].tobytes(), []).append((x_nodes[n // P], int(n)))
-    nodes = _Nodes(q_nodes, us_nodes)
+    for n in np.flatnonzero(job.status_nodes == CONVERGED):
+        at.setdefault(job.us_nodes[n, 1:].tobytes(), []).append((job.x_nodes[n // P], int(n)))
+    nodes = _Nodes(job.q_nodes, job.us_nodes)
     n = len(us)
     tips, status, residual = np.full((n, 3), np.nan), np.zeros(n, dtype=int), np.zeros(n)
     violations = np.zeros(n, dtype=np.int64)
-    maps = np.full((n, maps_nodes.shape[1]), np.nan)
+    maps = np.full((n, job.maps_nodes.shape[1]), np.nan)
     states = np.zeros((n, model.n_dof)) if settings.store_states else None
     for j in range(n):
-        eq, violations[j], maps[j] = _across(model, us[j], x_planes[j // P], at.get(us[j, 1:].tobytes(), []),
-                                             nodes, masks_nodes, maps_nodes, settings, tol, counters)
+        eq, violations[j], maps[j] = _across(model, us[j], job.x_planes[j // P], at.get(us[j, 1:].tobytes(), []),
+                                             nodes, job.masks_nodes, job.maps_nodes, settings, tol, counters)
         tips[j], status[j], residual[j] = eq.tip, eq.status, eq.residual
         if states is not None and eq.status == CONVERGED:
             states[j] = eq.q
-    return tips, status, residual, violations, maps, states, counters
+    return SweepResult(tips, status, residual, violations, maps, states, counters)

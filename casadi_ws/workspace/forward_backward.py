@@ -128,62 +128,115 @@ def algorithm1(ex: Exploration, executor: Executor, ctrl_c) -> None:
         ex.end_iteration()
 
 
-def _expand(model, q, u, A, S, Q, targets, scale, bsettings, Q_age=0, grid=None, reached=frozenset(), p=None,
-            threshold=None, predictor_error=None):
-    """Step 3 for one configuration: backward solves of its targets; returns plain data per target.
+@dataclass
+class ExpandJob:
+    """Step 3 for one configuration, or a share of its targets: all a worker needs to solve them."""
 
-    With the configuration's tip ``p`` and a ``threshold``, the targets are first put to the prefilter
-    (:func:`prefilter`, with the second-order model of Q where ``predictor_error``, that model's miss of this
-    configuration's own tip, says it can be trusted); a dropped target answers :data:`_PREFILTERED`. It runs
-    here, in the worker, rather than in the process handing out the jobs: there, its 2 s on the 4-cable trunk
-    held the lock the pool's threads need to feed the workers, and the run took 3-8 s longer
+    q: np.ndarray
+    """The configuration's state and inputs, and its sensitivities A, S and curvature Q (or None)."""
+    u: np.ndarray
+    A: np.ndarray
+    S: np.ndarray
+    Q: np.ndarray | None
+    targets: list
+    """The targets (3,) to solve for."""
+    scale: float
+    """The configuration's grid step (m)."""
+    backward: BackwardSettings
+    Q_age: int = 0
+    """How many generations the configuration's Q has been passed on (``BackwardSettings.curvature_age``)."""
+    grid: Grid | None = None
+    reached: frozenset = frozenset()
+    """Cells of ``grid`` reached in an earlier iteration, around the configuration's."""
+    p: np.ndarray | None = None
+    """The configuration's tip; with ``threshold``, the targets are put to the prefilter first."""
+    threshold: float | None = None
+    predictor_error: float | None = None
+    """How far the configuration's own tip lay from its parent's second-order model (in steps), or None."""
+
+
+@dataclass
+class Answer:
+    """What Step 4 reads of a target's backward solve."""
+
+    q: np.ndarray | None
+    u: np.ndarray | None
+    tip: np.ndarray | None
+    status: int
+    """A :class:`casadi_ws.status.Status` code (``PREFILTERED``: the target was not solved)."""
+    ok: bool
+    """A new verified equilibrium was found."""
+    A: np.ndarray | None = None
+    """The answer's sensitivities and curvature (None where Step 4 does not need them)."""
+    S: np.ndarray | None = None
+    Q: np.ndarray | None = None
+    age: int = 0
+    """0: Q is the answer's own; k > 0: the configuration's Q is passed on (not sent back), k generations old."""
+    equilibrium_solves: int = 0
+    factorizations: int = 0
+    violations: int = 0
+    """The admissibility mask (0: admissible)."""
+    maps: dict | None = None
+    predictor_error: float | None = None
+    branch: int = 0
+    """The answer's :class:`casadi_ws.solvers.equilibrium.Branch` code."""
+
+
+def _expand(model, job: ExpandJob) -> list[Answer]:
+    """Step 3 for one configuration: backward solves of its targets; returns an :class:`Answer` per target.
+
+    With the configuration's tip ``job.p`` and a ``job.threshold``, the targets are first put to the prefilter
+    (:func:`prefilter`, with the second-order model of Q where ``job.predictor_error``, that model's miss of
+    this configuration's own tip, says it can be trusted); a dropped target answers :data:`_PREFILTERED`. It
+    runs here, in the worker, rather than in the process handing out the jobs: there, its 2 s on the 4-cable
+    trunk held the lock the pool's threads need to feed the workers, and the run took 3-8 s longer
     (docs/methods.md).
 
     The sensitivities of each new configuration come from the backward's last Newton LU (at the
     second-order predictor, one iterate from the answer), refined with the exact tangent at the answer
     (A ~1 % off without, which the box would not notice but the next predictor would), and so does its
     curvature Q (reduced backward: the second-order predictor of its own targets), unless it takes this
-    configuration's Q, of age ``Q_age`` (``BackwardSettings.curvature_age``). They travel with the
+    configuration's Q, of age ``job.Q_age`` (``BackwardSettings.curvature_age``). They travel with the
     configuration, so expanding it needs no LU, in this process or in a worker, and the result does not
     depend on the number of workers. An answer that takes this configuration's Q answers None for it.
 
-    An answer that misses its target's cell and lands in one of ``reached`` (cells of ``grid`` reached in an
-    earlier iteration, around this configuration's) gets no sensitivities and no maps: Step 4 keeps only its
-    tip, status and admissibility (on the 4-cable trunk 59 of 2793 answers).
+    An answer that misses its target's cell and lands in one of ``job.reached`` (cells of ``job.grid``
+    reached in an earlier iteration, around this configuration's) gets no sensitivities and no maps: Step 4
+    keeps only its tip, status and admissibility (on the 4-cable trunk 59 of 2793 answers).
     """
     out = []
-    sens = (A, S) if Q is None else (A, S, Q)
-    passed_on = Q is not None and Q_age < _curvature_age(model, bsettings)
-    kept = [True] * len(targets)
-    if p is not None:
-        trusted = predictor_error is not None and threshold is not None and predictor_error <= TRUST * threshold
-        kept = prefilter(model, q, u, A, p, targets, scale, threshold, bsettings.edge_box is not None,
-                         Q if trusted else None)
-    for target, keep in zip(targets, kept):
+    q, u, Q, bsettings, scale = job.q, job.u, job.Q, job.backward, job.scale
+    sens = (job.A, job.S) if Q is None else (job.A, job.S, Q)
+    passed_on = Q is not None and job.Q_age < _curvature_age(model, bsettings)
+    kept = [True] * len(job.targets)
+    if job.p is not None:
+        trusted = (job.predictor_error is not None and job.threshold is not None
+                   and job.predictor_error <= TRUST * job.threshold)
+        kept = prefilter(model, q, u, job.A, job.p, job.targets, scale, job.threshold,
+                         bsettings.edge_box is not None, Q if trusted else None)
+    for target, keep in zip(job.targets, kept):
         if not keep:
             out.append(_PREFILTERED)
             continue
         res = backward(model, target, q, u, None, scale, bsettings, sens=sens)
-        A_new = S_new = Q_new = maps = None
-        age = 0
-        n_fac = res.factorizations
-        violations = 0
+        answer = Answer(res.q, res.u, res.tip, res.status, res.ok, equilibrium_solves=res.equilibrium_solves,
+                        factorizations=res.factorizations, predictor_error=res.predictor_error, branch=res.branch)
         if res.ok:
             fac = res.fac
             if fac is None:
                 fac = tangent_factorization(model, res.q, res.u)
-                n_fac += 1
-            violations = admissibility(model, res.q, res.u, fac).mask
-            if grid is not None and not _on_target(res.tip, target, scale) and grid.index(res.tip) in reached:
-                out.append((res.q, res.u, res.tip, res.status, res.ok, None, None, None, 0, res.equilibrium_solves,
-                            n_fac, violations, None, res.predictor_error, res.branch))
+                answer.factorizations += 1
+            answer.violations = admissibility(model, res.q, res.u, fac).mask
+            landed = job.grid is not None and not _on_target(res.tip, target, scale)
+            if landed and job.grid.index(res.tip) in job.reached:
+                out.append(answer)
                 continue
-            A_new, S_new, Q_new, G = _derivatives(model, res.q, res.u, fac, scale, bsettings, curved=not passed_on)
+            answer.A, answer.S, answer.Q, G = _derivatives(model, res.q, res.u, fac, scale, bsettings,
+                                                           curved=not passed_on)
             if passed_on:  # the caller has it: not sent back (~0.1 MB an answer on the 4-cable trunk)
-                Q_new, age = None, Q_age + 1
-            maps = point_maps(model, res.q, res.u, A_new, fac, G)
-        out.append((res.q, res.u, res.tip, res.status, res.ok, A_new, S_new, Q_new, age, res.equilibrium_solves,
-                    n_fac, violations, maps, res.predictor_error, res.branch))
+                answer.Q, answer.age = None, job.Q_age + 1
+            answer.maps = point_maps(model, res.q, res.u, answer.A, fac, G)
+        out.append(answer)
     return out
 
 
@@ -195,7 +248,7 @@ def _on_target(tip, target, eta) -> bool:
     return bool(np.all(np.abs(tip - target) <= 0.5 * eta * (1 + 1e-9)))
 
 
-_PREFILTERED = (None, None, None, int(Status.PREFILTERED), False, None, None, None, 0, 0, 0, 0, None, None, 0)
+_PREFILTERED = Answer(None, None, None, int(Status.PREFILTERED), False)
 """A target the prefilter dropped, as :func:`_expand` answers for a target it solved."""
 
 
@@ -414,9 +467,10 @@ class Exploration:
                 targets = [tg for _, tg in todo]
                 for part in np.array_split(np.arange(len(targets)), min(pieces, len(targets))):
                     sent.append((i, int(part[0])))
-                    yield (cfg.q, cfg.u, cfg.A, cfg.S, cfg.Q, [targets[m] for m in part], self.eta(cfg),
-                           self.bsettings, cfg.Q_age, *self._reached_near(cfg), cfg.p, self.settings.prefilter,
-                           cfg.predictor_error)
+                    grid, reached = self._reached_near(cfg)
+                    yield (ExpandJob(cfg.q, cfg.u, cfg.A, cfg.S, cfg.Q, [targets[m] for m in part], self.eta(cfg),
+                                     self.bsettings, cfg.Q_age, grid, reached, cfg.p, self.settings.prefilter,
+                                     cfg.predictor_error),)
 
         parts = {}
         for k, out in executor.map_unordered(_expand, self.problem, jobs()):
@@ -446,15 +500,15 @@ class Exploration:
         keep_inadmissible = self.problem.admissibility.keep
         for (cfg, todo), out in zip(tasks, answers):
             eta = self.eta(cfg)
-            for (cell, target), (q, u, tip, status, ok, A, S, Q, age, n_eq, n_fac, viol, maps, error,
-                                 branch) in zip(todo, out):
+            for (cell, target), a in zip(todo, out):
+                q, u, tip, status, ok, viol = a.q, a.u, a.tip, a.status, a.ok, a.violations
                 if status == Status.PREFILTERED:
                     self._fail(target, Status.PREFILTERED)
                     continue
                 self.counters["backward_solves"] += 1
-                self.counters["equilibrium_solves"] += n_eq
-                self.counters["factorizations"] += n_fac
-                self.counters["path_dependent"] += branch == Branch.PATH_DEPENDENT
+                self.counters["equilibrium_solves"] += a.equilibrium_solves
+                self.counters["factorizations"] += a.factorizations
+                self.counters["path_dependent"] += a.branch == Branch.PATH_DEPENDENT
                 if ok and viol and not keep_inadmissible:
                     # verified but not a state the robot can take: kept apart, never a reached cell; its
                     # neighbours are still explored from the configurations that are admissible
@@ -474,7 +528,8 @@ class Exploration:
                         self.counters["explored"] += 1
                     if not on_target:
                         self.counters["adopted"] += 1
-                    new = _Config(cell, tip, q, u, A, S, cfg.Q if age else Q, age, viol, maps, error)
+                    new = _Config(cell, tip, q, u, a.A, a.S, cfg.Q if a.age else a.Q, a.age, viol, a.maps,
+                                  a.predictor_error)
                     self._seed(new)
                     new_frontier.append(new)
                     self.reached.append(new)
