@@ -232,3 +232,32 @@ def test_rigid_rotation_gives_no_internal_force(model, rng):
     if model == "corotational":  # the same motion is far from force-free for the small-strain law
         lin = StaticModel(small_trunk("linear"))
         assert np.linalg.norm(lin.internal_force(q)) > 10 * ref
+
+
+def test_a_model_and_what_other_layers_built_for_it_go_when_it_is_dropped():
+    """One cache per model (issue: one assembler): the CasADi Functions, the rootfinder, the IPOPT solver of the
+    backward step, the admissibility samples and the maps' operator are the model's, not module globals keyed
+    by id(model) that kept every model of a long study alive."""
+    import gc
+    import weakref
+
+    from casadi_ws import FBSettings, forward_backward
+    from casadi_ws.fem.functions import residual_function
+    from casadi_ws.solvers.admissible import admissibility
+    from casadi_ws.solvers.rootfinder import rootfinder_newton
+    from casadi_ws.workspace.backward import BackwardSettings, backward_ipopt
+    from conftest import small_trunk
+
+    pb = small_trunk("corotational", n_cables=2)
+    model = StaticModel(pb)
+    residual_function(model)
+    q, rel, _ = rootfinder_newton(model, np.array([5.0, 5.0]), np.zeros(model.n_dof), 1.0, 1e-8, 30)
+    assert rel < 1e-8
+    backward_ipopt(model, model.p0 + np.array([0.002, 0.0, 0.0]), q, np.array([5.0, 5.0]), BackwardSettings())
+    admissibility(model, q, np.array([5.0, 5.0]))
+    fb = forward_backward(pb, FBSettings(step=0.02, progress=False), model=model)  # maps: the tip's axis
+    assert fb.n_points > 0 and len(model.cache._items) >= 4
+    ref = weakref.ref(model)
+    del model, fb
+    gc.collect()
+    assert ref() is None

@@ -191,11 +191,7 @@ def residual_function(model, with_load: bool = False) -> ca.Function:
     ``with_load`` adds a third input, the factor on the external loads F (used by continuation).
     Cached on the model: calling it twice returns the same Function.
     """
-    cache = model.__dict__.setdefault("_casadi_functions", {})
-    key = ("R", bool(with_load))
-    if key not in cache:
-        cache[key] = _build_residual(model, with_load)
-    return cache[key]
+    return model.cache.get(("residual_function", bool(with_load)), lambda: _build_residual(model, with_load))
 
 
 def _build_residual(model, with_load):

@@ -38,6 +38,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..actuation.base import quantity_functions, third_function
+from .cache import ModelCache
 from .contact import contact_set, split_faces
 from .pressure import ContinuousPressure
 from .terms import ObstacleContact, SelfContact, fischer_burmeister
@@ -96,6 +97,8 @@ class StaticModel:
 
     def __init__(self, problem, backend: str = "auto"):
         self.problem = problem
+        self.cache = ModelCache()
+        """What other layers build once for this model (:class:`casadi_ws.fem.cache.ModelCache`)."""
         mesh = problem.mesh
         self.mesh = mesh
         self.element = element = mesh.element
@@ -448,8 +451,14 @@ class StaticModel:
         """Current node positions (n, 3)."""
         return (self.X + q)[: self.n_mech].reshape(-1, 3)
 
-    def deformation_gradients(self, q: np.ndarray) -> np.ndarray:
-        """F = I + du/dX at every quadrature point, (m, n_qp, 3, 3)."""
+    @property
+    def quadrature_points(self) -> int:
+        """Quadrature points per element (the rows of :meth:`deformation_gradients` per element)."""
+        return self._G_qp.shape[1]
+
+    def deformation_operator(self) -> sp.csr_matrix:
+        """The sparse map of q to the entries of F - I at every quadrature point ((element, point, i, j) rows,
+        row-major), built once."""
         if "_F_op" not in self.__dict__:
             # F_ij at (element e, point k) = delta_ij + sum_a q[3 node_a + i] G[e, k, a, j]: a sparse map of q
             m, nq, nn, _ = self._G_qp.shape
@@ -458,8 +467,12 @@ class StaticModel:
             rows = (((e * nq + k) * 3 + i) * 3 + j).ravel()
             cols = (3 * self.mesh.tets[e, a] + i).ravel()
             self._F_op = sp.csr_matrix((self._G_qp[e, k, a, j].ravel(), (rows, cols)), shape=(m * nq * 9, self.n_dof))
+        return self._F_op
+
+    def deformation_gradients(self, q: np.ndarray) -> np.ndarray:
+        """F = I + du/dX at every quadrature point, (m, n_qp, 3, 3)."""
         m, nq = self._G_qp.shape[:2]
-        return np.eye(3) + (self._F_op @ q).reshape(m, nq, 3, 3)
+        return np.eye(3) + (self.deformation_operator() @ q).reshape(m, nq, 3, 3)
 
     def node_sizes(self) -> np.ndarray:
         """Per node, the mean edge of the smallest element it belongs to (m): the scale of a safe nodal move

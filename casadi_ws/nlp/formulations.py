@@ -31,7 +31,8 @@ import numpy as np
 from ..fem.functions import point_function, quantity_function, residual_function
 from ..solvers.rootfinder import quiet_stdout, register_solver
 
-__all__ = ["EquilibriumNLP", "IPOPT_OPTIONS", "NLPSolution", "quiet_stdout", "release_solvers", "tracking"]
+__all__ = ["EquilibriumNLP", "IPOPT_OPTIONS", "NLPSolution", "cached_tracking", "quiet_stdout", "release_solvers",
+           "tracking"]
 
 IPOPT_OPTIONS = {
     # measured on the backward problem: gradient scaling quadruples the iterations from a warm start
@@ -213,12 +214,13 @@ def tracking(model, points=None, weights=None, rho: float = 0.0) -> EquilibriumN
     return nlp
 
 
-_SOLVERS: dict[int, EquilibriumNLP] = {}
+def cached_tracking(model) -> EquilibriumNLP:
+    """The tracking NLP of the end-effector (:func:`tracking`), built once per model and kept with it."""
+    return model.cache.get("tracking", lambda: tracking(model))
 
 
-def release_solvers() -> None:
-    """Destroy the cached IPOPT solvers now, without MUMPS's farewell on stdout."""
-    with quiet_stdout():
-        _SOLVERS.clear()
-        gc.collect()
+def release_solvers(model) -> None:
+    """Destroy ``model``'s cached IPOPT solver now, without MUMPS's farewell on stdout."""
+    model.cache.pop("tracking")
+    gc.collect()
 

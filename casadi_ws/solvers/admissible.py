@@ -161,9 +161,8 @@ def _inside_obstacle(model, q) -> bool:
         return False
     from ..fem.contact import boundary_nodes
 
-    if "_obstacle_nodes" not in model.__dict__:
-        model._obstacle_nodes = boundary_nodes(model.mesh)
-    x = model.positions(q)[model._obstacle_nodes]
+    nodes = model.cache.get("boundary_nodes", lambda: boundary_nodes(model.mesh))
+    x = model.positions(q)[nodes]
     tol = 1e-9 * model.mesh.characteristic_length()
     return any(float(o.distance(x).min()) < -tol for o in obstacles)
 
@@ -362,9 +361,10 @@ def _clusters_meet(S: _Samples, x: np.ndarray, reach: float) -> bool:
 
 def _samples(model) -> _Samples:
     """The boundary nodes and the boundary faces' centroids, built once per model."""
-    cached = model.__dict__.get("_penetration_samples")
-    if cached is not None:
-        return cached
+    return model.cache.get("penetration_samples", lambda: _build_samples(model))
+
+
+def _build_samples(model) -> _Samples:
     import scipy.sparse as sp
 
     from ..fem.surface import boundary_faces
@@ -402,9 +402,7 @@ def _samples(model) -> _Samples:
     far = np.column_stack([i, j])[gap > NEAR_AT_REST * diameter]
     pairs = np.sort(np.stack([mesh.tets[:, [0, 0, 0, 1, 1, 2]], mesh.tets[:, [1, 2, 3, 2, 3, 3]]], axis=2)
                     .reshape(-1, 2), axis=1)
-    out = _Samples(W, keys, order, starts, far, np.unique(pairs, axis=0))
-    model.__dict__["_penetration_samples"] = out
-    return out
+    return _Samples(W, keys, order, starts, far, np.unique(pairs, axis=0))
 
 
 def stable_branch(model, q: np.ndarray, u: np.ndarray, mode: np.ndarray, tol: float | None = None,

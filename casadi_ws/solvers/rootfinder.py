@@ -16,7 +16,6 @@ its LDL did not converge (no pivoting) and QR was 7x slower.
 from __future__ import annotations
 
 import atexit
-import contextlib
 import gc
 import os
 import sys
@@ -25,33 +24,17 @@ import weakref
 import casadi as ca
 import numpy as np
 
+from ..fem.cache import quiet_stdout
+
 __all__ = ["equilibrium_function", "quiet_stdout", "register_solver", "release_rootfinders", "rootfinder_newton"]
 
-_ROOTFINDERS: dict = {}
-"""(id(model), max_iter, tol) -> (weak reference to the model, rootfinder, G): not keeping models alive."""
 _LIVE_SOLVERS: "weakref.WeakSet" = weakref.WeakSet()
 """Objects holding IPOPT/MUMPS solvers (``release()`` drops them), released quietly at exit."""
 
 
-@contextlib.contextmanager
-def quiet_stdout():
-    """Silence the C-level stdout (MUMPS prints 'Entering DMUMPS ... JOB=-2' when a solver is destroyed)."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 1)
-        yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-        os.close(devnull)
-
-
 def release_rootfinders() -> None:
-    """Destroy the cached rootfinders and the registered NLP solvers now, without MUMPS's farewell."""
+    """Destroy the registered NLP solvers now, without MUMPS's farewell (a model's rootfinders go with it)."""
     with quiet_stdout():
-        _ROOTFINDERS.clear()
         for holder in list(_LIVE_SOLVERS):
             holder.release()
         gc.collect()
@@ -82,13 +65,10 @@ def register_solver(holder) -> None:
 def _rootfinder(model, max_iter: int, tol: float) -> ca.Function:
     """rootfinder over G(q; u, load, s) = R(q, u, load) / s: s (a force scale) makes one absolute tolerance
     serve every solve."""
-    key = (id(model), max_iter, tol)
-    hit = _ROOTFINDERS.get(key)
-    if hit is not None and hit[0]() is model:
-        return hit[1]
-    for k in [k for k, v in _ROOTFINDERS.items() if v[0]() is None]:  # models gone since
-        with quiet_stdout():
-            del _ROOTFINDERS[k]
+    return model.cache.get(("rootfinder", max_iter, tol), lambda: _build_rootfinder(model, max_iter, tol))
+
+
+def _build_rootfinder(model, max_iter: int, tol: float) -> ca.Function:
     from ..fem.functions import residual_function
 
     R = residual_function(model, with_load=True)
@@ -96,11 +76,9 @@ def _rootfinder(model, max_iter: int, tol: float) -> ca.Function:
     q, u, load, s = ca.MX.sym("q", n), ca.MX.sym("u", model.n_u), ca.MX.sym("load"), ca.MX.sym("s")
     G = ca.Function("G", [q, u, load, s], [R(q, u, load) / s], ["q", "u", "load", "s"], ["G"])
     # |R|_inf < tol s / sqrt(n) implies |R|_2 < tol s, the package's test
-    rf = ca.rootfinder("equilibrium", "newton", G, {
+    return ca.rootfinder("equilibrium", "newton", G, {
         "linear_solver": "mumps", "abstol": tol / np.sqrt(n), "abstolStep": 0.0, "max_iter": max_iter,
         "error_on_fail": False})
-    _ROOTFINDERS[key] = (weakref.ref(model), rf, G)
-    return rf
 
 
 def rootfinder_newton(model, u, q, load, tol, max_iter):

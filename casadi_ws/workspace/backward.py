@@ -267,11 +267,9 @@ def _within_limits(model, q, A, S, r, du, lo, hi):
 
 def backward_ipopt(model, target, q, u, settings):
     """Backward problem (8) by the full-space NLP; the answer is re-verified by a Newton solve."""
-    from ..nlp.formulations import _SOLVERS, tracking
+    from ..nlp.formulations import cached_tracking
 
-    nlp = _SOLVERS.get(id(model))
-    if nlp is None or nlp.model is not model:
-        nlp = _SOLVERS[id(model)] = tracking(model)
+    nlp = cached_tracking(model)
     sol = nlp.solve(q, u, targets=target)
     # verify: the same equilibrium test as everywhere else, from IPOPT's answer
     eq = solve_equilibrium(model, sol.u, q0=q, u0=u, guess=sol.q)

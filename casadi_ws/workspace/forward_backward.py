@@ -733,7 +733,7 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
         if settings.backward.formulation == "ipopt":
             from ..nlp.formulations import release_solvers
 
-            release_solvers()
+            release_solvers(model)
         result = ex.result(build_model)
         result.boundary = surface
         if not result.counters["stopped_at_max_cells"]:

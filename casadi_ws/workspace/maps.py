@@ -39,22 +39,23 @@ def effort(model, u) -> np.ndarray:
 
 def _tip_axis(model):
     """(the tip element's rows of the F operator, the rest axis): built once per model."""
-    if "_tip_axis" not in model.__dict__:
-        nodes = np.unique(model.C.indices // 3)
-        tets = model.mesh.tets
-        # the elements holding the end effector: those with the most of its embedding nodes
-        count = np.isin(tets, nodes).sum(axis=1)
-        elems = np.flatnonzero(count == count.max())
-        X = model.mesh.nodes
-        base = X[model.fixed_nodes].mean(axis=0) if len(model.fixed_nodes) else X.mean(axis=0)
-        axis = model.p0 - base
-        axis = axis / max(np.linalg.norm(axis), 1e-300)
-        model.deformation_gradients(np.zeros(model.n_dof))  # builds model._F_op
-        nq = model._G_qp.shape[1]
-        rows = ((elems[:, None] * nq + np.arange(nq)[None]) * 9)[..., None] + np.arange(9)
-        op = model._F_op[rows.ravel()]
-        model._tip_axis = (op, len(elems) * nq, axis)
-    return model._tip_axis
+    return model.cache.get("tip_axis", lambda: _build_tip_axis(model))
+
+
+def _build_tip_axis(model):
+    nodes = np.unique(model.C.indices // 3)
+    tets = model.mesh.tets
+    # the elements holding the end effector: those with the most of its embedding nodes
+    count = np.isin(tets, nodes).sum(axis=1)
+    elems = np.flatnonzero(count == count.max())
+    X = model.mesh.nodes
+    base = X[model.fixed_nodes].mean(axis=0) if len(model.fixed_nodes) else X.mean(axis=0)
+    axis = model.p0 - base
+    axis = axis / max(np.linalg.norm(axis), 1e-300)
+    nq = model.quadrature_points
+    rows = ((elems[:, None] * nq + np.arange(nq)[None]) * 9)[..., None] + np.arange(9)
+    op = model.deformation_operator()[rows.ravel()]
+    return op, len(elems) * nq, axis
 
 
 def direction(model, q) -> np.ndarray:
