@@ -95,3 +95,33 @@ def test_public_api_is_listed_and_importable():
             assert hasattr(mod, name), f"casadi_ws.{layer}.{name}"
     for name in ("forward", "forward_backward", "compare", "load_result", "WorkspaceResult", "reach", "Status"):
         assert name in casadi_ws.__all__
+
+
+def test_no_module_below_io_reads_what_only_io_s_problem_has():
+    """The layers below ``io`` read a model's specification (:class:`casadi_ws.fem.spec.ModelSpec`), never
+    what io's Problem adds (the command line's ``workspace`` defaults, the study's ``task``...): every attribute
+    they read of a ``problem``/``spec`` (a variable, ``self.``, ``model.``) is a ModelSpec field, property or
+    method, and a model's specification is ``model.spec``."""
+    import dataclasses
+
+    from casadi_ws.fem.spec import ModelSpec
+
+    allowed = {f.name for f in dataclasses.fields(ModelSpec)} | {
+        n for n in dir(ModelSpec) if not n.startswith("_")}
+    below = LAYERS[: LAYERS.index("io")]
+    wrong = []
+    for path in PKG.rglob("*.py"):
+        if _layer(path) not in below:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.Attribute):
+                continue
+            v = node.value
+            holder = v.id if isinstance(v, ast.Name) else v.attr if isinstance(v, ast.Attribute) else None
+            base = v.value.id if isinstance(v, ast.Attribute) and isinstance(v.value, ast.Name) else None
+            if node.attr == "problem" and isinstance(v, ast.Name) and v.id in ("model", "m"):
+                wrong.append(f"{path.relative_to(PKG)}:{node.lineno}: {v.id}.problem (the model's is .spec)")
+            described = base == "result" or (base == "self" and path.name == "result.py")  # a result's dict
+            if holder in ("problem", "pb", "spec") and not described and node.attr not in allowed:
+                wrong.append(f"{path.relative_to(PKG)}:{node.lineno}: .{node.attr} of a {holder}")
+    assert not wrong, "reads beyond a ModelSpec below io:\n" + "\n".join(sorted(wrong))

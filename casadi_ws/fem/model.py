@@ -45,6 +45,7 @@ from .terms import ObstacleContact, SelfContact, fischer_burmeister
 from .kernels import ElementBatch
 from .materials import element_functions
 from .mesh import embed
+from .spec import ModelSpec
 
 __all__ = ["ModelError", "ROUNDOFF", "StaticModel", "fischer_burmeister"]
 
@@ -93,10 +94,13 @@ class _ActuatorData:
 
 
 class StaticModel:
-    """Numeric static model of a :class:`casadi_ws.io.problem.Problem`."""
+    """Numeric static model of a :class:`casadi_ws.fem.spec.ModelSpec` (a problem file's
+    :class:`casadi_ws.io.problem.Problem` is one)."""
 
-    def __init__(self, problem, backend: str = "auto"):
-        self.problem = problem
+    def __init__(self, spec: ModelSpec, backend: str = "auto"):
+        problem = spec
+        self.spec = spec
+        """What the model was built from; the layers below ``io`` read nothing else of it."""
         self.cache = ModelCache()
         """What other layers build once for this model (:class:`casadi_ws.fem.cache.ModelCache`)."""
         mesh = problem.mesh
@@ -113,7 +117,7 @@ class StaticModel:
         self.fixed_nodes = np.flatnonzero(fixed.all(axis=1))
         self.free_mech = np.flatnonzero(~fixed.ravel())
         self.n_free_mech = self.free_mech.size
-        self.contact = contact_set(mesh, getattr(problem, "obstacles", []), ~fixed.all(axis=1),
+        self.contact = contact_set(mesh, problem.obstacles, ~fixed.all(axis=1),
                                    problem.material.young_modulus)
         """The contact points with the obstacles (:class:`casadi_ws.fem.contact.ContactSet`), or None."""
         self._backend = backend
@@ -184,6 +188,11 @@ class StaticModel:
 
         self._force_scale(w)
 
+    @property
+    def problem(self) -> ModelSpec:
+        """The specification it was built from (for the layers above ``fem``: :attr:`spec`)."""
+        return self.spec
+
     def _register_terms(self, fixed) -> list:
         """The terms after the elements and actuators, each given its rows at the end of the state."""
         pos = -np.ones(self.n_mech, dtype=np.int64)
@@ -192,9 +201,9 @@ class StaticModel:
         if self.contact is not None:
             terms.append(ObstacleContact(self.contact, pos))
         moving = ~fixed.all(axis=1)
-        for pair in getattr(self.problem, "self_contact", []):
-            terms.append(SelfContact(pair["name"], pair["points"][moving[pair["points"]]], split_faces(pair["faces"]),
-                                     self.mesh.nodes, pos, self.problem.material.young_modulus, pair.get("reach")))
+        for pair in self.spec.self_contact:
+            terms.append(SelfContact(pair.name, pair.points[moving[pair.points]], split_faces(pair.faces),
+                                     self.mesh.nodes, pos, self.spec.material.young_modulus, pair.reach))
         th = self._taylor_hood_elements()
         if th.size:
             tets = self.mesh.tets[th]
@@ -213,8 +222,8 @@ class StaticModel:
         """(materials, index of each element's): the body's, then the regions' with a law or constants of
         their own."""
         law = np.zeros(self.mesh.n_tets, dtype=np.int64)
-        materials = [self.problem.material]
-        for tets, region in self.problem.regions:
+        materials = [self.spec.material]
+        for tets, region in self.spec.regions:
             law[tets] = len(materials)
             materials.append(region)
         return materials, law
@@ -231,7 +240,7 @@ class StaticModel:
     def _build_elements(self, backend: str):
         """The element groups: the elements of each kernel (a region may have a law of its own), their rest
         inputs and compiled kernels. Returns the elements' rest nodes, quadrature weights and densities."""
-        problem, mesh, element = self.problem, self.mesh, self.element
+        problem, mesh, element = self.spec, self.mesh, self.element
         Xe = mesh.nodes[mesh.tets]
         w, G = element.rest_geometry(Xe)
         materials, law = self._materials()
@@ -265,7 +274,7 @@ class StaticModel:
         the law. Nearly incompressible, the volumetric stress K (J - 1) carries K eps of round-off (J - 1 is
         computed from det F ~ 1): the modulus is then 0.3 K, which equals E at nu = 0.45, so up to there the
         scale is E as it always was (at nu = 0.499 Newton stalled at 10x the old floor)."""
-        problem, mesh, mat = self.problem, self.mesh, self.problem.material
+        problem, mesh, mat = self.spec, self.mesh, self.spec.material
 
         def modulus(m):
             E, nu = m.young_modulus, m.poisson_ratio
@@ -589,7 +598,7 @@ class StaticModel:
             if not c > 0:
                 act = self.actuators[a]
                 j = [x for x in self.actuators if x.kind == act.kind].index(act)
-                raise ModelError(f"{self.problem.source}: {act.kind}s[{j}].control: {act.name!r} does not move the "
+                raise ModelError(f"{self.spec.source}: {act.kind}s[{j}].control: {act.name!r} does not move the "
                                  f"body at rest (its points are held: compliance {c:g}), so its {act.quantity_name} "
                                  f"cannot be prescribed")
             self.kappa[k] = 1.0 / c

@@ -22,7 +22,7 @@ from ..fem.materials import FORMULATIONS, HYPERELASTIC_CONSTANTS, MATERIAL_MODEL
 from ..fem.silicones import SILICONES
 from ..fem.mesh import (Mesh, MeshError, box_mesh, closest_point_in_tet, embed, load_mesh, quadratic,
                         transform_points, trunk_mesh)
-from ..solvers.admissible import AdmissibilitySettings
+from ..fem.spec import AdmissibilitySettings, ModelSpec, SelfContactPair, SolverSettings
 from ..solvers.linear import LINEAR_SOLVERS, available
 
 __all__ = [
@@ -48,67 +48,14 @@ class ProblemError(ValueError):
 
 
 @dataclass
-class SolverSettings:
-    """Settings of the equilibrium (Newton) solve."""
+class Problem(ModelSpec):
+    """A workspace problem: the model's specification (:class:`casadi_ws.fem.spec.ModelSpec`) and what the
+    command line and the studies read beside it."""
 
-    tolerance: float = 1e-8
-    """Relative residual ||R|| / ||H^T u + F|| under which an equilibrium counts as verified."""
-    max_iterations: int = 30
-    """Newton iterations per solve (each load step of a continuation counts separately)."""
-    max_load_steps: int = 64
-    """Continuation steps allowed when a direct Newton solve fails."""
-    newton: str = "builtin"
-    """``builtin`` (Newton reusing LU factorisations across iterations and points: the faster) or
-    ``rootfinder`` (casadi.rootfinder's Newton with MUMPS on the same residual Function)."""
-    linear: str = "auto"
-    """The sparse factorisation of the tangent (:mod:`casadi_ws.solvers.linear`): ``auto`` (PARDISO where
-    installed, else SuperLU), ``superlu`` or ``pardiso``."""
-
-
-@dataclass
-class Problem:
-    mesh: Mesh
-    """The body at rest (SI units)."""
-    material: Material
-    fixed_nodes: np.ndarray
-    """Indices of the nodes held fixed (zero displacement)."""
-    actuators: list[Actuator]
-    """The actuators (cables, then cavities, in file order); the input vector u holds their inputs in this
-    order."""
-    end_effector: np.ndarray
-    """Rest position of the point of interest (3,), embedded in the mesh."""
-    gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    """Gravitational acceleration (3,), m/s^2."""
-    point_loads: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
-    """(point, force) pairs: constant forces in N on embedded points."""
-    solver: SolverSettings = field(default_factory=SolverSettings)
     workspace: dict = field(default_factory=dict)
     """Defaults for ``casadi-ws solve`` from the file's ``workspace`` section (method, n_d, step, ...)."""
-    name: str = "problem"
-    source: str = "<python>"
-    regions: list[tuple[np.ndarray, Material]] = field(default_factory=list)
-    """Parts of the body of another material: (tetrahedron indices, Material) pairs, later ones win. A
-    region may have a law of its own (a strain-limiting layer of a stiffer silicone)."""
     task: object = None
     """A region the robot should reach (:class:`casadi_ws.workspace.measures.Task`), or None."""
-    partial_fixed: list[tuple[np.ndarray, tuple[int, ...]]] = field(default_factory=list)
-    """Further supports holding only some components of some nodes: (node indices, components 0/1/2)
-    pairs (SOFA's PartialFixedConstraint: symmetry planes, rollers)."""
-    admissibility: AdmissibilitySettings = field(default_factory=AdmissibilitySettings)
-    """Which admissibility checks run on every reported equilibrium, and their tolerances."""
-    obstacles: list = field(default_factory=list)
-    """Rigid, fixed obstacles (:class:`casadi_ws.fem.contact.Obstacle`) the body may not enter."""
-    self_contact: list = field(default_factory=list)
-    """Pairs of the body's regions that may meet: ``{name, points (boundary node indices), faces (boundary
-    faces, oriented out of the body)}``; the points may not enter the faces."""
-
-    def fixed_dofs(self) -> np.ndarray:
-        """Mask (n_nodes, 3) of the displacement components held at zero."""
-        mask = np.zeros((self.mesh.n_nodes, 3), dtype=bool)
-        mask[np.asarray(self.fixed_nodes, dtype=np.int64)] = True
-        for nodes, comps in self.partial_fixed:
-            mask[np.ix_(np.asarray(nodes, dtype=np.int64), list(comps))] = True
-        return mask
 
     @property
     def cavities(self) -> list:
@@ -119,18 +66,6 @@ class Problem:
     def cables(self) -> list[Cable]:
         """The actuators that are cables, in input order."""
         return [a for a in self.actuators if isinstance(a, Cable)]
-
-    @property
-    def n_u(self) -> int:
-        return len(self.actuators)
-
-    @property
-    def u_min(self) -> np.ndarray:
-        return np.array([a.u_min for a in self.actuators], dtype=float)
-
-    @property
-    def u_max(self) -> np.ndarray:
-        return np.array([a.u_max for a in self.actuators], dtype=float)
 
 
 def nodes_in_box(mesh: Mesh, lower, upper) -> np.ndarray:
@@ -863,7 +798,7 @@ def _read_self_contact(r: _Reader, lst, mesh: Mesh) -> list:
         if inside:
             r.fail(key, f"{inside} of its {points.size} points lie on or behind its surface at rest (the points must "
                         f"be outside, on the side the surface faces)")
-        out.append({"name": name, "points": points, "faces": tris, "reach": reach})
+        out.append(SelfContactPair(name, points, tris, reach))
     return out
 
 
@@ -963,8 +898,9 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     admissibility = _read_admissibility(r, d.get("admissibility"))
     name = str(d.get("name", Path(source).stem))
     self_contact = _read_self_contact(r, d.get("self_contact"), mesh)
-    return Problem(mesh, material, fixed, cables + cavities, end_effector, gravity, loads, solver, workspace, name,
-                   source, regions, task, partial_fixed, admissibility, obstacles, self_contact)
+    return Problem(mesh, material, fixed, cables + cavities, end_effector, gravity, loads, solver, name=name,
+                   source=source, regions=regions, partial_fixed=partial_fixed, admissibility=admissibility,
+                   obstacles=obstacles, self_contact=self_contact, workspace=workspace, task=task)
 
 
 def read_yaml(path: str | Path, what: str = "problem file", error=None):

@@ -36,9 +36,10 @@ def fingerprint(method: str, model, settings: dict) -> str:
     for a in (model.X, model.mesh.tets, model.free, model.F, model.u_min, model.u_max, model.p0,
               *(g.Pe for g in model.element_groups), model.prescribed):
         h.update(np.ascontiguousarray(a).tobytes())
-    pb = model.problem
-    h.update(json.dumps([asdict(pb.material), [asdict(m) for _, m in pb.regions], asdict(pb.solver), [a.describe() for a in model.actuators],
-                         asdict(pb.admissibility), [o.describe() for o in getattr(pb, "obstacles", [])]],
+    pb = model.spec
+    h.update(json.dumps([asdict(pb.material), [asdict(m) for _, m in pb.regions], asdict(pb.solver),
+                         [a.describe() for a in model.actuators], asdict(pb.admissibility),
+                         [o.describe() for o in pb.obstacles]],
                         default=float).encode())
     h.update(json.dumps(settings, sort_keys=True, default=str).encode())
     return h.hexdigest()[:20]

@@ -42,33 +42,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse.linalg as sla
 
+from ..fem.spec import AdmissibilitySettings
+
 __all__ = ["Admissibility", "AdmissibilitySettings", "VIOLATIONS", "admissibility", "admissible_equilibrium", "decode", "encode",
            "penetrating_samples", "smallest_eigenvalues", "stable_branch"]
 
 VIOLATIONS = ("unstable", "inverted", "self_penetration", "stroke", "volume", "stretch", "obstacle")
 """The names of the admissibility checks, in the order of their bits in stored masks."""
-
-
-@dataclass
-class AdmissibilitySettings:
-    """Which checks run and their tolerances (problem file: ``admissibility:``)."""
-
-    stability: bool = True
-    """Refuse equilibria whose tangent is not positive definite (see the module's table)."""
-    inversion: bool = True
-    """Refuse equilibria with det F below ``min_det_F`` at some quadrature point."""
-    self_penetration: bool = True
-    """Refuse equilibria whose deformed boundary passes through the body."""
-    min_det_F: float = 0.1
-    """Floor of det F (volume ratio) at every quadrature point: below it an element counts as inverted
-    (no law here is meant for a tenfold volumetric compression of a rubber)."""
-    penetration_depth: float = 0.01
-    """A boundary sample counts as inside a tetrahedron when all four of its barycentric coordinates there
-    exceed this (1 %: the margin that keeps a curved 10-node face's samples, judged against the straight
-    tetrahedron of its corners, out of their neighbours)."""
-    keep: bool = False
-    """Keep inadmissible equilibria among the reported points, marked (``--keep-inadmissible``); by
-    default they are counted and kept apart."""
 
 
 @dataclass
@@ -128,7 +108,7 @@ def admissibility(model, q: np.ndarray, u: np.ndarray, fac=None, K=None,
     pass from the points around it (a forward point interpolated between Newton points of its grid line
     that passed them), so only the cheap checks run.
     """
-    s = settings or getattr(model.problem, "admissibility", None) or AdmissibilitySettings()
+    s = settings or model.spec.admissibility
     out = Admissibility()
     names = []
     out.min_det_F = float(model.jacobians(q).min())
@@ -156,7 +136,7 @@ def admissibility(model, q: np.ndarray, u: np.ndarray, fac=None, K=None,
 
 def _inside_obstacle(model, q) -> bool:
     """A boundary node of the deformed body lies inside an obstacle (deeper than 1e-9 of the mesh's size)."""
-    obstacles = getattr(model.problem, "obstacles", None)
+    obstacles = model.spec.obstacles
     if not obstacles:
         return False
     from ..fem.contact import boundary_nodes

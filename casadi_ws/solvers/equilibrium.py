@@ -178,8 +178,7 @@ class _Guard:
 
     def __init__(self, model, q_first: np.ndarray | None = None):
         self.model = model
-        adm = getattr(getattr(model, "problem", None), "admissibility", None)
-        self.floor = float(getattr(adm, "min_det_F", 0.1))
+        self.floor = float(model.spec.admissibility.min_det_F)
         self.size = model.node_sizes()
         if q_first is not None:
             j = model.jacobians(q_first)
@@ -230,7 +229,7 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
     not round-off (1e-13 of q), but a stop below ``tol`` counts as converged: a point is never a failure once
     its residual passes the check.
     """
-    if getattr(model.problem.solver, "newton", "builtin") == "rootfinder":
+    if model.spec.solver.newton == "rootfinder":
         from .rootfinder import rootfinder_newton
 
         q, rel, its = rootfinder_newton(model, u, q, load, tol if target is None else min(tol, target), max_iter)
@@ -371,7 +370,7 @@ def solve_equilibrium(model, u, q0: np.ndarray | None = None, u0: np.ndarray | N
     problem's settings. ``target`` (< tol): iterate on towards this residual, e.g. for points that others are
     interpolated from; the point is accepted at ``tol`` all the same.
     """
-    settings = model.problem.solver
+    settings = model.spec.solver
     tol = settings.tolerance if tol is None else tol
     max_iter = settings.max_iterations if max_iter is None else max_iter
     u = np.asarray(u, dtype=float).reshape(-1)
@@ -486,7 +485,7 @@ def quasi_static(model, u, q0: np.ndarray | None = None, u0: np.ndarray | None =
     most ``max_step`` of the way (smaller where a step fails). The definition of a reported point
     (docs/methods.md "One answer per input"), and the reference the tests compare every method's points
     with."""
-    settings = model.problem.solver
+    settings = model.spec.solver
     tol = settings.tolerance if tol is None else tol
     u = np.asarray(u, dtype=float).reshape(-1)
     if q0 is not None and u0 is not None:

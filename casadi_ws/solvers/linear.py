@@ -183,7 +183,7 @@ def choose(name: str) -> str:
 
 def solver_of(model) -> str:
     """The backend of ``model``'s factorisations: its problem's ``solver.linear``, by :func:`choose`."""
-    return choose(getattr(getattr(getattr(model, "problem", None), "solver", None), "linear", "auto"))
+    return choose(model.spec.solver.linear if model is not None else "auto")
 
 
 # ---- PARDISO -------------------------------------------------------------------------------------------

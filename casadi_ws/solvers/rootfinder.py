@@ -103,7 +103,7 @@ def equilibrium_function(model, points=None, tol: float | None = None, max_iter:
     """
     from ..fem.functions import point_function
 
-    settings = model.problem.solver
+    settings = model.spec.solver
     tol = settings.tolerance if tol is None else tol
     max_iter = settings.max_iterations if max_iter is None else max_iter
     rf = _rootfinder(model, max_iter, tol)

@@ -539,7 +539,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
     maps = np.full((n, len(MAPS) + 2 * model.n_u), np.nan)
     states = np.zeros((n, model.n_dof)) if settings.store_states else None
     counters = new_counters()
-    tol = model.problem.solver.tolerance if settings.tol is None else settings.tol
+    tol = model.spec.solver.tolerance if settings.tol is None else settings.tol
     sw = _Sweep()
     first = 0
     if resume is not None:
@@ -867,7 +867,7 @@ def _between_job(model, job: _Between) -> SweepResult:
     """Phase 2 of :func:`_cube` for some planes between solved ones: every point the polynomial across the
     solved planes at the same inputs of the other two actuators, verified, checked (:func:`_across`)."""
     settings, us = job.settings, job.us
-    tol = model.problem.solver.tolerance if settings.tol is None else settings.tol
+    tol = model.spec.solver.tolerance if settings.tol is None else settings.tol
     counters = new_counters()
     P = len(us) // len(job.x_planes)
     at: dict[bytes, list] = {}

@@ -306,5 +306,5 @@ def describe(problem, model) -> dict:
         "u_min": model.u_min.tolist(), "u_max": model.u_max.tolist(),
         "end_effector": np.asarray(problem.end_effector).tolist(), "tolerance": problem.solver.tolerance,
         "admissibility": asdict(problem.admissibility), "default_step": default_step(model),
-        "obstacles": [{"name": o.name, "kind": o.kind} for o in getattr(problem, "obstacles", [])],
+        "obstacles": [{"name": o.name, "kind": o.kind} for o in problem.obstacles],
     }
