@@ -317,7 +317,7 @@ def test_every_method_runs_with_the_continuous_pressure(tmp_path):
     import yaml
 
     from casadi_ws import ForwardSettings, forward, problem_from_dict
-    from casadi_ws.fem.pressure import ContinuousPressure
+    from casadi_ws.fem.terms import ContinuousPressure
     from casadi_ws.solvers.admissible import admissibility
 
     from conftest import REPO

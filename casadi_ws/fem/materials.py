@@ -84,7 +84,7 @@ class Material:
     """How a strain-energy law's volumetric term is integrated: ``displacement`` (at every quadrature point)
     , ``mixed`` (a constant pressure per element, condensed on the element: the mean dilatation, which does
     not lock on 10-node tetrahedra as nu -> 0.5) or ``taylor_hood`` (a pressure continuous across elements,
-    linear on each 10-node tetrahedron, one unknown per corner node: :class:`casadi_ws.fem.pressure.
+    linear on each 10-node tetrahedron, one unknown per corner node: :class:`casadi_ws.fem.terms.pressure.
     ContinuousPressure`). The laws given by E and nu take ``displacement``."""
 
     def __post_init__(self):

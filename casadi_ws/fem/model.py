@@ -40,8 +40,7 @@ import scipy.sparse as sp
 from ..actuation.base import quantity_functions, third_function
 from .cache import ModelCache
 from .contact import contact_set, split_faces
-from .pressure import ContinuousPressure
-from .terms import ObstacleContact, SelfContact, fischer_burmeister
+from .terms import ContinuousPressure, ObstacleContact, SelfContact, fischer_burmeister
 from .kernels import ElementBatch
 from .materials import element_functions
 from .mesh import embed
@@ -123,7 +122,7 @@ class StaticModel:
         self._backend = backend
         self.terms = self._register_terms(fixed)
         """The registered terms (:mod:`casadi_ws.fem.terms`): contact with obstacles, self-contact, the
-        continuous pressure (:mod:`casadi_ws.fem.pressure`). Their unknowns (contact forces over kappa,
+        continuous pressure (:mod:`casadi_ws.fem.terms.pressure`). Their unknowns (contact forces over kappa,
         pressures over kappa) follow the intensities in the state."""
         self.pivot_threshold = 0.0 if any(t.negatives for t in self.terms) else 0.01
         """SuperLU's diag_pivot_thresh for this model's tangents (:func:`casadi_ws.solvers.equilibrium.
@@ -229,7 +228,7 @@ class StaticModel:
         return materials, law
 
     def _taylor_hood_elements(self) -> np.ndarray:
-        """The elements whose law takes the continuous pressure (:mod:`casadi_ws.fem.pressure`)."""
+        """The elements whose law takes the continuous pressure (:mod:`casadi_ws.fem.terms.pressure`)."""
         materials, law = self._materials()
         th = [k for k, m in enumerate(materials) if m.kernel.endswith("_iso")]
         if th and self.element.name != "tet10":

@@ -29,9 +29,9 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from .elements import TET10
-from .kernels import ElementBatch
-from .terms import Term
+from ..elements import TET10
+from ..kernels import ElementBatch
+from .base import Term
 
 __all__ = ["ContinuousPressure", "pressure_functions"]
 
@@ -53,7 +53,7 @@ def pressure_functions() -> dict[str, ca.Function]:
     J = ca.det(ca.reshape(Fv, 3, 3))
     dJ = ca.gradient(J, Fv)
     fun = ca.Function("dJ", [Fv, Lv], [J, dJ, ca.hessian(J, Fv)[0], ca.hessian(ca.dot(Lv, dJ), Fv)[0]])
-    from .materials import _dF_du
+    from ..materials import _dF_du
 
     x = ca.reshape(u, 3, nn).T
     g, dg, H, T, Hl = [0] * 4, [0] * 4, 0, 0, [0] * 4
