@@ -10,6 +10,7 @@ from .actuation import Actuator, Cable, Cavity, trunk_cable
 from .control import FollowResult, ReachResult, ReachSettings, follow, reach
 from .fem import (TET4, ElementType, Material, Mesh, MeshError, StaticModel, box_mesh, load_mesh, point_function,
                   residual_function, trunk_mesh)
+from .fem.terms import Term
 from .io import Problem, ProblemError, SolverSettings, default_problem, load_problem, problem_from_dict
 from .runtime import DaskExecutor, Executor, ProcessExecutor, SerialExecutor
 from .nlp import EquilibriumNLP, NLPSolution, tracking
@@ -45,6 +46,7 @@ __all__ = [
     "SolverSettings",
     "StaticModel",
     "Status",
+    "Term",
     "Study",
     "StudyResult",
     "TET4",

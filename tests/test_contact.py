@@ -40,7 +40,7 @@ def test_a_block_on_a_table_weighs_on_it():
     (c,) = m.contacts(eq.q)
     assert c["name"] == "table" and np.allclose(c["force"], reaction, rtol=1e-12, atol=1e-15)
     assert c["points"] == 25  # the bottom face's 5 x 5 nodes
-    g = m.contact.gaps(m.positions(eq.q))[0]
+    g = m.contact_terms()[0].contact_set.gaps(m.positions(eq.q))[0]
     assert g.min() > -1e-9 * 0.01
 
 

@@ -89,14 +89,14 @@ def test_kernels_evaluated_lanes_at_a_time_give_the_scalar_numbers_to_the_bit(mo
         assert scalar.lanes == 1
         for a, b in zip(kernel(*args), scalar(*args)):
             assert np.array_equal(a, b)
-    slot = np.ascontiguousarray(m._k_slot.reshape(m.mesh.n_tets, -1)[:n], dtype=np.int32)
+    slot = np.ascontiguousarray(m.elements.k_slot.reshape(m.mesh.n_tets, -1)[:n], dtype=np.int32)
     scalar = ElementBatch(g.stiff.fun, "c", vector=False)
-    summed = g.stiff.scatter(slot, m._k_nnz + 1, *args)
-    assert np.array_equal(summed, scalar.scatter(slot, m._k_nnz + 1, *args))
+    summed = g.stiff.scatter(slot, m.nnz + 1, *args)
+    assert np.array_equal(summed, scalar.scatter(slot, m.nnz + 1, *args))
     # the nodal values read by the kernels where they are (``gather``), in both drivers: the same sums
     edofs = np.ascontiguousarray(g.edofs[:n], dtype=np.int32)
     for kernel in (g.stiff, scalar):
-        assert np.array_equal(kernel.scatter(slot, m._k_nnz + 1, q, *args[1:], gather=edofs), summed)
+        assert np.array_equal(kernel.scatter(slot, m.nnz + 1, q, *args[1:], gather=edofs), summed)
 
 
 @pytest.mark.parametrize("kernel, params", [
@@ -167,20 +167,20 @@ def test_the_stiffness_and_forces_summed_as_computed_are_the_assembled_ones_to_t
     whole = None
     for g in m.element_groups:
         ke, = g.stiff(q[g.edofs], g.Xe, g.Ge, g.Pe)
-        slot = m._k_slot.reshape(m.mesh.n_tets, -1)
+        slot = m.elements.k_slot.reshape(m.mesh.n_tets, -1)
         part = np.bincount((slot if g.index is None else slot[g.index]).ravel(), weights=ke.ravel(),
-                           minlength=m._k_nnz + 1)
+                           minlength=m.nnz + 1)
         whole = part if whole is None else whole + part
-    assert np.array_equal(m._stiffness_data(q), whole)
+    assert np.array_equal(m.elements.stiffness_data(q, m.nnz), whole)
     K = m.element_stiffness(q)
-    assert np.array_equal(K.data, whole[: m._k_nnz])
+    assert np.array_equal(K.data, whole[: m.nnz])
     # without a compiler the batch is computed whole by CasADi's virtual machine and summed by bincount
     K_vm = StaticModel(pb, backend="casadi").element_stiffness(q)
     assert np.abs(K_vm - K).max() < 1e-12 * np.abs(K.data).max()
     # the forces too (one law: summed as computed, with their norm; two: the batch, then a bincount)
-    fe, = m._element_values(q, "force")
+    fe, = m.elements.values(q, "force")
     f, norm = m.internal_force(q, norm=True)
-    assert np.array_equal(f, np.bincount(m._edofs.ravel(), weights=fe.ravel(), minlength=m.n_dof))
+    assert np.array_equal(f, np.bincount(m.elements.edofs.ravel(), weights=fe.ravel(), minlength=m.n_dof))
     assert abs(norm - np.linalg.norm(fe)) < 1e-14 * norm
 
 

@@ -71,7 +71,7 @@ def test_stacked_cantilevers_share_the_load_as_beam_theory_says(tmp_path):
     # what the surface pushes on the points, the points push back on the surface: the forces sum to zero
     f = m.contact_forces(eq.q)[: m.n_mech].reshape(-1, 3)
     assert np.abs(f.sum(axis=0)).max() <= 1e-9 * R
-    term = m.terms[0]
+    term = m.contact_terms()[0]
     assert term.geometry(m, eq.q).g.min() >= -1e-9 * T  # no point enters the lower beam
     assert admissibility(m, eq.q, np.zeros(1), eq.factorization).admissible
 
@@ -110,10 +110,10 @@ def test_self_contact_tangent_and_hessian_match_finite_differences(tmp_path):
                                       tmp_path))
     u, h = np.zeros(1), 1e-7
     q, rng = _pressed_state(m, forces=True)
-    assert m.terms[0].geometry(m, q).g.min() < 1e-4  # some points are close to the surface
+    assert m.contact_terms()[0].geometry(m, q).g.min() < 1e-4  # some points are close to the surface
     _, K, _ = m.residual_and_tangent(q, u)
     K = K.toarray()
-    rows = m.terms[0].rows
+    rows = m.contact_terms()[0].rows
     for j in [rows.start, rows.start + 5, rows.stop - 1] + list(rng.choice(m.n_free_mech, 8, replace=False)):
         dq = np.zeros(m.n_dof)
         dq[m.free[j]] = h

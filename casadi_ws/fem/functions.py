@@ -133,30 +133,21 @@ class _ResidualFunctions:
         rows = m._k_rows.astype(np.int64)
         cols = np.repeat(np.arange(n), np.diff(m._k_indptr))
         self.K = _Pattern((n, n), rows, cols)
-        # dR/du_a is nonzero on the free dofs that move actuator a's points
-        du_rows, du_cols = [], []
-        prescribed = {int(a): k for k, a in enumerate(getattr(m, "prescribed", []))}
-        for a, d in enumerate(m._act):
-            # a prescribed quantity's input enters its own equation only
-            r = np.array([m.n_free_mech + prescribed[a]]) if a in prescribed else np.unique(d.W[:, m.free].tocoo().col)
-            du_rows.append(r)
-            du_cols.append(np.full(r.size, a))
+        # dR/du_a is nonzero where the terms say: the free dofs that move actuator a's points, or a prescribed
+        # quantity's own equation
+        du = {}
+        for t in m.terms:
+            du.update(t.input_pattern(m) or {})
         cat = lambda parts: np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)  # noqa: E731
-        self.dRdu = _Pattern((n, nu), cat(du_rows), cat(du_cols))
-        # d(K^T lam)/dq: the element pattern of K and the actuators' third derivatives (point couplings)
+        self.dRdu = _Pattern((n, nu), cat([du[a] for a in sorted(du)]),
+                             cat([np.full(du[a].size, a) for a in sorted(du)]))
+        # d(K^T lam)/dq: K's pattern and what the terms add beyond it (the actuators' third derivatives, the
+        # prescribed quantities' couplings of their dofs)
         hr, hc = [rows], [cols]
-        for d in m._act:
-            Wf = d.W[:, m.free].tocsr()
-            T = d.third.sparsity_out(0)
-            tr, tc = (np.asarray(x, dtype=np.int64) for x in T.get_triplet())
-            S = sp.csr_matrix((np.ones(tr.size), (tr, tc)), shape=(Wf.shape[0], Wf.shape[0]))
-            P = (abs(Wf).T @ S @ abs(Wf)).tocoo()
-            hr.append(P.row)
-            hc.append(P.col)
-        for r in getattr(m, "_border_dofs", []):  # lam_k phi(a, b(q)) couples all the actuator's dofs
-            rr, cc = np.meshgrid(r, r, indexing="ij")
-            hr.append(rr.ravel())
-            hc.append(cc.ravel())
+        for t in m.terms:
+            r, c = t.hessian_pattern(m)
+            hr.append(r)
+            hc.append(c)
         keys = np.unique(np.concatenate(hc) * n + np.concatenate(hr))
         self.H = _Pattern((n, n), keys % n, keys // n)
         self._h_keys = keys
@@ -325,8 +316,9 @@ def quantity_function(model) -> ca.Function:
     q = ca.SX.sym("q", model.n_free)
     if not model.n_u:
         return ca.Function("Q", [q], [ca.SX(0, 1)], ["q"], ["Q"])
-    W = sp.csc_matrix(model._W_all[:, model.free])
+    act = model.actuators_term
+    W = sp.csc_matrix(act.W_all[:, model.free])
     W.sort_indices()
     Wd = ca.DM(ca.Sparsity(W.shape[0], W.shape[1], W.indptr.tolist(), W.indices.tolist()), W.data)
-    P = ca.mtimes(Wd, q) + ca.DM(model._W_all @ model.X)
-    return ca.Function("Q", [q], [model._actuators_qg(P)[0]], ["q"], ["Q"])
+    P = ca.mtimes(Wd, q) + ca.DM(act.W_all @ model.X)
+    return ca.Function("Q", [q], [act.quantities_function(P)[0]], ["q"], ["Q"])

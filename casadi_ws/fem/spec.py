@@ -17,7 +17,11 @@ from .contact import Obstacle
 from .materials import Material
 from .mesh import Mesh
 
-__all__ = ["AdmissibilitySettings", "ModelSpec", "SelfContactPair", "SolverSettings"]
+__all__ = ["AdmissibilitySettings", "ModelError", "ModelSpec", "SelfContactPair", "SolverSettings"]
+
+
+class ModelError(ValueError):
+    """A problem that reads well but cannot make a model; ``str()`` is one line naming the file and key."""
 
 
 @dataclass
@@ -109,6 +113,9 @@ class ModelSpec:
     """Rigid, fixed obstacles the body may not enter."""
     self_contact: list[SelfContactPair] = field(default_factory=list)
     """Pairs of the body's regions that may meet."""
+    terms: list = field(default_factory=list)
+    """Terms added to those the fields above make (:mod:`casadi_ws.fem.terms`): a problem file's ``springs``
+    and ``pressure_loads``, or a user's own :class:`casadi_ws.fem.terms.Term`. Each model works on a copy."""
 
     def fixed_dofs(self) -> np.ndarray:
         """Mask (n_nodes, 3) of the displacement components held at zero."""

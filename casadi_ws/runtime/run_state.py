@@ -41,6 +41,8 @@ def fingerprint(method: str, model, settings: dict) -> str:
                          [a.describe() for a in model.actuators], asdict(pb.admissibility),
                          [o.describe() for o in pb.obstacles]],
                         default=float).encode())
+    # the terms a specification adds (springs, pressure loads, a user's) and the self-contact pairs, as pickled
+    h.update(pickle.dumps([pb.terms, pb.self_contact], protocol=4))
     h.update(json.dumps(settings, sort_keys=True, default=str).encode())
     return h.hexdigest()[:20]
 

@@ -90,10 +90,8 @@ def designed_negatives(model) -> int | None:
     """How many negative eigenvalues ``model``'s tangent has where it is stable, by design: those of a
     symmetric saddle point's rows (the continuous pressure's); None where some rows do not keep it symmetric
     (contact, prescribed quantities: the stability test then factorises the stiffness it holds)."""
-    saddle = [getattr(t, "negatives", None) for t in getattr(model, "terms", ())]
-    if getattr(model, "n_lam", 0) or None in saddle:
-        return None
-    return sum(saddle)
+    saddle = [t.negatives for t in model.terms]
+    return None if None in saddle else sum(saddle)
 
 
 @dataclass

@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..contact import ContactSet
-from .base import Term, fischer_burmeister
+from .base import Term, complementarity, held_block, point_pairs as _pairs
 
 __all__ = ["ContactGeometry", "ContactTerm", "ObstacleContact"]
 
@@ -49,18 +49,10 @@ class ContactGeometry:
         return self.curvature
 
 
-def _pairs(pt: np.ndarray):
-    """Every pair (e1, e2) of entries that belong to one point (entries sorted by point)."""
-    count = np.bincount(pt) if pt.size else np.zeros(0, dtype=np.int64)
-    start = np.cumsum(count) - count
-    tot = count[pt]
-    e1 = np.repeat(np.arange(pt.size), tot)
-    e2 = start[pt[e1]] + (np.arange(e1.size) - np.repeat(np.cumsum(tot) - tot, tot))
-    return e1, e2
-
-
 class ContactTerm(Term):
     """Contact points with normal forces as unknowns and Fischer-Burmeister rows (see the module)."""
+
+    contact = True
 
     kappa: float
     """Stiffness scale (N/m) of the rows: E h, the stiffness of a boundary node of size h."""
@@ -85,7 +77,7 @@ class ContactTerm(Term):
         lam = self.forces(q)
         pt, fpos, val = geo.entries
         R -= np.bincount(fpos, weights=lam[pt] * val, minlength=R.size)
-        fb = fischer_burmeister(lam, self.kappa * geo.g, self.eps)
+        fb = complementarity(lam, self.kappa * geo.g, self.eps)
         R[self.rows] = fb[0]
         return geo, lam, fb
 
@@ -135,14 +127,13 @@ class ContactTerm(Term):
             return 1.0
         return float(max(1e-2, np.min((g[hit] + depth[hit]) / -dg[hit])))
 
-    def held(self, model, q):
+    def held(self, model, q, u):
         """The points that press, held 1000x stiffer than kappa along their gradients."""
         geo = self.geometry(model, q)
-        pb = fischer_burmeister(self.forces(q), self.kappa * geo.g, self.eps)[2]
+        pb = complementarity(self.forces(q), self.kappa * geo.g, self.eps)[2]
         pt, fpos, val = geo.entries
-        e1, e2 = geo.pairs if geo.pairs is not None else _pairs(pt)
-        n = model.n_free_mech
-        return sp.csc_matrix((1e3 * self.kappa * pb[pt[e1]] * val[e1] * val[e2], (fpos[e1], fpos[e2])), shape=(n, n))
+        pairs = geo.pairs if geo.pairs is not None else _pairs(pt)
+        return held_block(1e3 * self.kappa * pb, pt, fpos, val, pairs, model.n_free_mech)
 
     def hessian(self, model, q, u, lam):
         """lam_i phi(a_i, kappa g_i(q)) exactly; -a_i lam . dg_i/dq without its third derivatives of the
@@ -150,7 +141,7 @@ class ContactTerm(Term):
         kap = self.kappa
         geo = self.geometry(model, q)
         a = self.forces(q)
-        _, pa, pb, paa, pab, pbb = fischer_burmeister(a, kap * geo.g, self.eps)
+        _, pa, pb, paa, pab, pbb = complementarity(a, kap * geo.g, self.eps)
         pt, fpos, val = geo.entries
         cp, r, c, d2g = geo.second()
         e1, e2 = geo.pairs if geo.pairs is not None else _pairs(pt)
@@ -176,7 +167,7 @@ class ObstacleContact(ContactTerm):
     name = "obstacles"
 
     def __init__(self, contact: ContactSet, pos):
-        self.contact = contact
+        self.contact_set = contact
         self.kappa, self.eps, self.h = contact.kappa, contact.eps, contact.h
         self.n_rows = contact.n
         # the nonzeros of the points' gradients: point, coordinate, weight, free dof (fixed ones dropped)
@@ -198,7 +189,7 @@ class ObstacleContact(ContactTerm):
         return np.concatenate([col, row, j * n + j, fpos[e2] * n + fpos[e1]])
 
     def geometry(self, model, q) -> ContactGeometry:
-        g, nrm, H = self.contact.gaps(model.positions(q))
+        g, nrm, H = self.contact_set.gaps(model.positions(q))
         pt, coord, w, fpos = self._ce
         e1, e2 = self._cp
         d2g = w[e1] * w[e2] * H[pt[e1], coord[e1], coord[e2]]
@@ -206,16 +197,16 @@ class ObstacleContact(ContactTerm):
 
     @property
     def multistable(self) -> np.ndarray:
-        planes = np.array([ob.kind == "plane" for ob in self.contact.obstacles], dtype=bool)
-        return ~planes[self.contact.obstacle]
+        planes = np.array([ob.kind == "plane" for ob in self.contact_set.obstacles], dtype=bool)
+        return ~planes[self.contact_set.obstacle]
 
     def report(self, model, q) -> list[dict]:
         """Per obstacle: name, kind, the force [fx, fy, fz] (N) it exerts, points pressing, penetration (m)."""
         geo = self.geometry(model, q)
         lam, on = self.forces(q), self.in_contact(model, q)
         out = []
-        for k, ob in enumerate(self.contact.obstacles):
-            i = self.contact.obstacle == k
+        for k, ob in enumerate(self.contact_set.obstacles):
+            i = self.contact_set.obstacle == k
             out.append({"name": ob.name, "kind": ob.kind, "force": (lam[i] @ geo.normal[i]).tolist(),
                         "points": int(np.count_nonzero(on & i)),
                         "penetration": float(max(0.0, -geo.g[i].min())) if i.any() else 0.0})

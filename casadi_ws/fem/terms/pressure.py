@@ -114,9 +114,11 @@ class ContinuousPressure(Term):
         """p at the corner nodes (Pa)."""
         return self.kappa * q[self.state]
 
+    def setup(self, model, pos):
+        self._ed = pos[self.edofs]
+
     def pattern(self, model, pos):
-        ed = pos[self.edofs]
-        self._ed = ed
+        ed = self._ed
         n = model.n_free
         nd = ed.shape[1]
         a, b = np.meshgrid(np.arange(nd), np.arange(nd), indexing="ij")  # vec column-major: entry (a, b) at b nd + a
@@ -155,7 +157,7 @@ class ContinuousPressure(Term):
         keep = e >= 0
         return sp.csr_matrix((dg[keep], (j[keep], e[keep])), shape=(self.n_rows, self.n_free_mech))
 
-    def held(self, model, q):
+    def held(self, model, q, u):
         """The Schur complement's share: sum_i dg_i dg_i^T / c_i (the pressure follows the displacements)."""
         D = self.volume_gradients(model, q)
         return (D.T @ sp.diags(1.0 / self.c) @ D).tocsc()
