@@ -87,7 +87,7 @@ def nodes_on_plane(mesh: Mesh, point, normal, tolerance: float = 1e-9) -> np.nda
 
 _TOP_KEYS = {"name", "description", "mesh", "material", "material_regions", "gravity", "fixed", "cables",
              "cavities", "end_effector", "loads", "solver", "workspace", "task", "admissibility", "obstacles",
-             "self_contact"}
+             "self_contact", "springs", "pressure_loads"}
 _MESH_GEN = {"generate", "length", "radius_base", "radius_tip", "resolution", "size", "divisions", "origin",
              "order"}
 _MESH_FILE = {"file", "scale", "units", "order", "transform"}
@@ -275,13 +275,16 @@ def _check_size(r: _Reader, key: str, n_tets: float) -> None:
         r.fail(key, f"would generate {n_tets:.3g} tetrahedra, more than {MAX_GENERATED_TETS:.0e}")
 
 
-def _read_fixed(r: _Reader, d, mesh: Mesh, obstacles=()):
+def _read_fixed(r: _Reader, d, mesh: Mesh, obstacles=(), held=()):
     """``fixed``: one selection or a list of them; each a box or a plane, optionally with ``components``.
     Returns (fully fixed nodes, [(nodes, components)]). An obstacle the body touches at rest supports it
-    along its normal (a block resting on a table): its touching nodes count in the rigid-motion test."""
+    along its normal (a block resting on a table): its touching nodes count in the rigid-motion test, as do
+    the nodes ``held`` by springs (``springs``: then ``fixed`` may be absent, an empty list)."""
     from ..fem.contact import boundary_nodes
 
-    if isinstance(d, list):
+    if isinstance(d, list) and not d and held:
+        parts = []
+    elif isinstance(d, list):
         if not d:
             r.fail("fixed", "expected a selection or a non-empty list of selections")
         parts = [_read_selection(r, s, mesh, f"fixed[{i}]", alone=False) for i, s in enumerate(d)]
@@ -291,7 +294,7 @@ def _read_fixed(r: _Reader, d, mesh: Mesh, obstacles=()):
     partial = [(n, c) for n, c in parts if c != (0, 1, 2)]
     # rigid motions are prevented only if no infinitesimal rigid motion leaves every fixed component at 0
     rows = []
-    for nodes, comps in [(full, (0, 1, 2))] + partial:
+    for nodes, comps in [(full, (0, 1, 2))] + partial + [(h, (0, 1, 2)) for h in held]:
         x = mesh.nodes[nodes] - mesh.nodes.mean(0)
         for c in comps:
             modes = np.zeros((len(nodes), 6))
@@ -802,6 +805,84 @@ def _read_self_contact(r: _Reader, lst, mesh: Mesh) -> list:
     return out
 
 
+def _read_springs(r: _Reader, lst, mesh: Mesh) -> list:
+    """``springs``: each ``{name, nodes: <selection>, stiffness: N/m per node, anchors: [[x, y, z], ...]}``
+    (:class:`casadi_ws.fem.terms.springs.Springs`); ``anchors`` one point for every selected node (in the
+    order of their indices) or one for all; without it each node is held to its rest position."""
+    from ..fem.terms.springs import Springs
+
+    if lst is None:
+        return []
+    if not isinstance(lst, list) or not lst:
+        r.fail("springs", "expected a list of {name, nodes, stiffness, anchors}, 'nodes' a selection as in 'fixed'")
+    out = []
+    for i, s in enumerate(lst):
+        key = f"springs[{i}]"
+        r.mapping(s, key, {"name", "nodes", "stiffness", "anchors"})
+        if "nodes" not in s:
+            r.fail(f"{key}.nodes", "missing: a selection of nodes (box, sphere, plane or indices)")
+        if isinstance(s["nodes"], dict) and "components" in s["nodes"]:
+            r.fail(f"{key}.nodes.components", "not used here: a spring holds all three components")
+        nodes, _ = _read_selection(r, s["nodes"], mesh, f"{key}.nodes", False)
+        k = r.number(s, "stiffness", key, lo=0.0, lo_open=True)
+        anchors = None
+        if s.get("anchors") is not None:
+            anchors = r.points(s["anchors"], f"{key}.anchors")
+            if len(anchors) == 1:
+                anchors = np.repeat(anchors, nodes.size, axis=0)
+            elif len(anchors) != nodes.size:
+                r.fail(f"{key}.anchors", f"expected one point, or one per selected node ({nodes.size}), got "
+                                         f"{len(anchors)}")
+        out.append(Springs(nodes, k, anchors, name=str(s.get("name", f"springs{i + 1}"))))
+    return out
+
+
+def _read_pressure_loads(r: _Reader, lst, mesh: Mesh) -> list:
+    """``pressure_loads``: each ``{name, surface: <selection>, pressure: Pa}``: a pressure on the boundary faces
+    whose nodes are all selected, following them as they move (:class:`casadi_ws.fem.terms.pressure_load.
+    PressureLoad`; positive pushes into the body)."""
+    from ..fem.surface import boundary_faces
+    from ..fem.terms.pressure_load import PressureLoad
+
+    if lst is None:
+        return []
+    if not isinstance(lst, list) or not lst:
+        r.fail("pressure_loads", "expected a list of {name, surface, pressure}, 'surface' a selection as in 'fixed'")
+    faces = boundary_faces(mesh)
+    out = []
+    for i, s in enumerate(lst):
+        key = f"pressure_loads[{i}]"
+        r.mapping(s, key, {"name", "surface", "pressure"})
+        if "surface" not in s:
+            r.fail(f"{key}.surface", "missing: a selection of the body's boundary (box, sphere, plane or indices)")
+        if isinstance(s["surface"], dict) and "components" in s["surface"]:
+            r.fail(f"{key}.surface.components", "not used here: a pressure acts along the surface's normal")
+        nodes, _ = _read_selection(r, s["surface"], mesh, f"{key}.surface", False)
+        tris = faces[np.isin(faces, nodes).all(axis=1)]
+        if len(tris) == 0:
+            r.fail(f"{key}.surface", "holds no whole boundary face (every node of a face must be selected)")
+        out.append(PressureLoad(tris, r.number(s, "pressure", key), name=str(s.get("name", f"pressure{i + 1}"))))
+    return out
+
+
+_BUILTIN_TERMS = ("elements", "actuators", "intensities", "loads", "obstacles", "pressure")
+
+
+def _unique_names(r: _Reader, named: list[tuple[str, str]]) -> None:
+    """The names of self-contact pairs, springs and pressure loads name the model's terms: each its own."""
+    seen: dict[str, str] = {}
+    counts: dict[str, int] = {}
+    for key, name in named:
+        i = counts.get(key, 0)
+        counts[key] = i + 1
+        where = f"{key}[{i}].name"
+        if name in _BUILTIN_TERMS:
+            r.fail(where, f"{name!r} is the name of one of the model's own terms; choose another")
+        if name in seen:
+            r.fail(where, f"{name!r} is already the name of {seen[name]}; give each its own")
+        seen[name] = where.removesuffix(".name")
+
+
 def _read_task(r: _Reader, value, base: Path):
     """``task``: a box or a CSV of points (:class:`casadi_ws.workspace.measures.Task`), or None."""
     if value is None:
@@ -833,7 +914,7 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     if not isinstance(d, dict):
         r.fail("", f"expected a mapping at the top level, got {type(d).__name__}")
     r.mapping(d, "", _TOP_KEYS)
-    for k in ("mesh", "material", "fixed"):
+    for k in ("mesh", "material") + (() if d.get("springs") else ("fixed",)):
         if k not in d:
             r.fail(k, "missing (required)")
     if "cables" not in d and "cavities" not in d:
@@ -850,7 +931,9 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     regions = _read_regions(r, d.get("material_regions"), mesh, material)
     gravity = r.vector(d["gravity"], "gravity") if d.get("gravity") is not None else np.zeros(3)
     obstacles = _read_obstacles(r, d.get("obstacles"), mesh, base)
-    fixed, partial_fixed = _read_fixed(r, d["fixed"], mesh, obstacles)
+    springs = _read_springs(r, d.get("springs"), mesh)
+    held = [t.nodes for t in springs]
+    fixed, partial_fixed = _read_fixed(r, d.get("fixed", []), mesh, obstacles, held)
     cables = _read_cables(r, d["cables"], mesh) if "cables" in d else []
     cavities = _read_cavities(r, d["cavities"], mesh, base) if "cavities" in d else []
 
@@ -898,9 +981,12 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     admissibility = _read_admissibility(r, d.get("admissibility"))
     name = str(d.get("name", Path(source).stem))
     self_contact = _read_self_contact(r, d.get("self_contact"), mesh)
+    terms = springs + _read_pressure_loads(r, d.get("pressure_loads"), mesh)
+    _unique_names(r, [("self_contact", p.name) for p in self_contact] +
+                  [("springs" if t in springs else "pressure_loads", t.name) for t in terms])
     return Problem(mesh, material, fixed, cables + cavities, end_effector, gravity, loads, solver, name=name,
                    source=source, regions=regions, partial_fixed=partial_fixed, admissibility=admissibility,
-                   obstacles=obstacles, self_contact=self_contact, workspace=workspace, task=task)
+                   obstacles=obstacles, self_contact=self_contact, terms=terms, workspace=workspace, task=task)
 
 
 def read_yaml(path: str | Path, what: str = "problem file", error=None):

@@ -15,11 +15,13 @@ from .elements import ElementGroup, Elements
 from .loads import Loads
 from .prescribed import Prescribed
 from .pressure import ContinuousPressure, pressure_functions
+from .pressure_load import PressureLoad
 from .self_contact import MLS_SLOTS, SelfContact
+from .springs import Springs
 
 __all__ = ["ActuatorData", "Actuators", "ContactGeometry", "ContactTerm", "ContinuousPressure", "ElementGroup",
-           "Elements", "Evaluation", "Loads", "MLS_SLOTS", "ObstacleContact", "Prescribed",
-           "SelfContact", "Term",
+           "Elements", "Evaluation", "Loads", "MLS_SLOTS", "ObstacleContact", "Prescribed", "PressureLoad",
+           "SelfContact", "Springs", "Term",
            "builtin_terms", "complementarity", "fischer_burmeister", "held_block", "point_pairs",
            "pressure_functions"]
 
