@@ -438,3 +438,42 @@ def test_a_stiff_layer_on_a_sub_topology_adds_its_stiffness(tmp_path):
     centroids = m.nodes[m.tets].mean(axis=1)
     assert sorted(tets.tolist()) == np.flatnonzero(centroids[:, 1] <= 0).tolist()
     assert not any("bodies" in n for n in tr.notes)  # a layer, not a second body
+
+
+def test_sofa_soft_springs_constant_forces_and_surface_pressure(tmp_path):
+    """The importer's rules: a soft RestShapeSpringsForceField becomes ``springs`` (a stiff one stays a support:
+    tests/test_sofa.py), ConstantForceField ``loads``, SurfacePressureForceField on a surface of the body's
+    points ``pressure_loads`` with casadi-ws's sign; the translated problem solves."""
+    from casadi_ws import StaticModel, solve_equilibrium
+    from casadi_ws.fem.surface import boundary_faces
+    from casadi_ws.fem.terms import PressureLoad, Springs
+
+    _, m = _box_file(tmp_path)
+    f = boundary_faces(m)
+    side = f[(m.nodes[f][:, :, 0] > 5 - 1e-9).all(axis=1)]  # the +x side, wound out of the body
+    meshio.write(tmp_path / "side.stl", meshio.Mesh(m.nodes, [("triangle", side)]))
+    top = np.flatnonzero(m.nodes[:, 2] > 40 - 1e-9)
+    body = _BODY.format(transform="").replace(
+        "body.addObject('FixedConstraint', indices='@roi.indices')",
+        "body.addObject('RestShapeSpringsForceField', points='@roi.indices', stiffness=50)")
+    extra = f"""\
+    body.addObject('ConstantForceField', indices={top.tolist()}, totalForce=[0, 10, 0])
+    skin = body.addChild('skin')
+    skin.addObject('MeshSTLLoader', name='side', filename='side.stl')
+    skin.addObject('MechanicalObject')
+    skin.addObject('SurfacePressureForceField', pressure=0.5)
+    skin.addObject('BarycentricMapping')
+    """
+    tr = translate(_scene(tmp_path, body, extra), out_dir=tmp_path)
+    assert "fixed" not in tr.problem
+    (s,) = tr.problem["springs"]
+    assert s["stiffness"] == pytest.approx(50.0)  # N/m in mm-kg-s: 50 kg/s^2 either way
+    assert len(tr.problem["loads"]) == top.size
+    assert np.allclose(np.sum([ld["force"] for ld in tr.problem["loads"]], axis=0), [0, 0.01, 0])  # 10 mN
+    (pl,) = tr.problem["pressure_loads"]
+    assert pl["pressure"] == pytest.approx(-500.0)  # 0.5 kPa along the outward winding: pulls the side out
+    p = _load(tr, tmp_path)
+    springs, load = p.terms
+    assert isinstance(springs, Springs) and isinstance(load, PressureLoad) and len(load.faces) == len(side)
+    eq = solve_equilibrium(StaticModel(p), p.u_min)
+    assert eq.converged and (eq.tip - p.end_effector)[0] > 1e-4  # the side pulled out along +x

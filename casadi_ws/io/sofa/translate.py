@@ -5,7 +5,7 @@ The rules, one per SOFA component (docs/sofa.md lists them with what each become
 - the body is the node holding a ``TetrahedronFEMForceField`` (or ``TetrahedronHyperelasticityFEMForceField``);
   its mesh comes from the node's mesh loader (``MeshVTKLoader``, ``MeshGmshLoader``, ...), placed by the
   loader's ``rotation``/``translation``/``scale``/``scale3d``;
-- fixed nodes: ``FixedConstraint``/``FixedProjectiveConstraint`` indices, ``RestShapeSpringsForceField``
+- fixed nodes: ``FixedConstraint``/``FixedProjectiveConstraint`` indices, stiff ``RestShapeSpringsForceField``
   points, ``PartialFixed(Projective)Constraint`` with its directions; indices given as a link to a
   ``BoxROI``/``SphereROI`` are selected here as SOFA would (bounds inclusive, in the scene's units);
 - cables: a ``CableConstraint``/``CableActuator`` on the points of its node's ``MechanicalObject``
@@ -15,6 +15,9 @@ The rules, one per SOFA component (docs/sofa.md lists them with what each become
 - cavities: a ``SurfacePressureConstraint`` on its node's surface loader (vertices embedded like SOFA's
   barycentric mapping), bounds ``minPressure``/``maxPressure``, or with ``valueType`` volumeGrowth
   ``control: volume`` and ``minVolumeGrowth``/``maxVolumeGrowth``;
+- soft supports: a ``RestShapeSpringsForceField`` softer than :data:`STIFF_SPRINGS` becomes ``springs`` (N/m);
+- loads: ``ConstantForceField`` on the body's points becomes ``loads``; ``SurfacePressureForceField`` on a
+  surface of the body's points ``pressure_loads`` (sign turned to casadi-ws's: positive pushes in);
 - the end effector: the first ``PositionEffector`` point, else the centre of the body's far end;
 - mass: ``UniformMass`` ``totalMass``/``vertexMass``, ``MeshMatrixMass``/``DiagonalMass`` ``massDensity``;
 - units: from gravity's magnitude (9.81: m-kg-s, 9810: mm-kg-s) unless given.
@@ -96,6 +99,15 @@ def _flat_points(v) -> np.ndarray:
     if len(flat) % 3:
         raise ValueError(f"{len(flat)} numbers are not a list of 3-D points")
     return np.asarray(flat, dtype=float).reshape(-1, 3)
+
+
+def _floats(v) -> np.ndarray:
+    """SOFA's numeric data (a number, a list, nested or a string) as a flat float array."""
+    if isinstance(v, Data):
+        v = v.value
+    if isinstance(v, str):
+        v = v.replace(",", " ").split()
+    return np.asarray(v if isinstance(v, (list, tuple, np.ndarray)) else [v], dtype=float).ravel()
 
 
 def _ints(v) -> list[int]:
@@ -242,6 +254,7 @@ def translate(path: str | Path, units: str | None = None, out_dir: str | Path | 
     tr.problem["gravity"] = (_flat_points(g)[0] * sc.length if g is not None else np.array([0, -9.81, 0])).tolist()
     _fixed(sc)
     _actuators(sc)
+    _loads(sc)
     _effector(sc)
     tr.untranslated = _leftovers(sc, sc.used)
     _open_strokes(sc)
@@ -273,9 +286,10 @@ def _body_mesh(sc: _Scene) -> None:
     loader = loaders[0]
     pts, mesh_file, transform, raw = _loader_points(sc, loader, L)
     sc.in_tets = np.zeros(len(pts), bool)
-    for c in raw.cells:
-        if c.type in ("tetra", "tetra10"):
-            sc.in_tets[np.asarray(c.data).ravel()] = True
+    tets = [np.asarray(c.data)[:, :4] for c in raw.cells if c.type in ("tetra", "tetra10")]
+    for t in tets:
+        sc.in_tets[t.ravel()] = True
+    sc.tets = np.concatenate(tets) if tets else None
     sc.used.add(id(loader))
     mesh = {"file": os.path.relpath(mesh_file.resolve(), sc.out_dir.resolve()), "scale": L}
     if transform:
@@ -337,10 +351,15 @@ def _material(sc: _Scene) -> None:
         tr.comments["material_regions"] = "force fields on sub-topologies (stiff layers): their stiffness adds to the body's"
 
 
+STIFF_SPRINGS = 1e3
+"""A ``RestShapeSpringsForceField`` stiffer than this many times the stiffness of a boundary node (E times the
+mesh's mean edge) holds its nodes as a support (stlib3's ``FixedBox``: 1e12); a softer one is ``springs``."""
+
+
 def _fixed(sc: _Scene) -> None:
     """The supports on the body's node or a child of it (stlib3's FixedBox adds a node with a BoxROI and
-    springs): ``sc.fixed`` as (entry, comment) pairs."""
-    tr, fixed = sc.tr, []
+    springs): ``sc.fixed`` as (entry, comment) pairs, and the soft springs as ``springs`` entries."""
+    tr, fixed, springs = sc.tr, [], []
     for node, o in [(n, o) for n in sc.body.walk() for o in _objects(n, _FIXED)]:
         sc.used.add(id(o))
         key = "points" if o.type == "RestShapeSpringsForceField" else "indices"
@@ -357,15 +376,45 @@ def _fixed(sc: _Scene) -> None:
             if comps != ["x", "y", "z"]:
                 entry["components"] = comps
         if o.type == "RestShapeSpringsForceField":
-            tr.notes.append(f"{o.type} '{o.name}' (stiffness {o.data.get('stiffness', '?')}) translated as fixed nodes")
+            k = _spring_stiffness(sc, o)
+            if k is not None:
+                springs.append(({"name": o.name, "nodes": entry, "stiffness": k}, f"{o.type} '{o.name}': {how}"))
+                continue
+            tr.notes.append(f"{o.type} '{o.name}' (stiffness {o.data.get('stiffness', '?')}, over {STIFF_SPRINGS:g} "
+                            f"times a boundary node's) translated as fixed nodes")
         fixed.append((entry, f"{o.type} '{o.name}': {how}"))
-    if not fixed:
+    if not fixed and not springs:
         sc.fail(f"no FixedConstraint, RestShapeSpringsForceField or PartialFixedConstraint on {sc.body.path()}: the "
                 f"body is not held")
-    tr.problem["fixed"] = [e for e, _ in fixed]
-    for i, (_, c) in enumerate(fixed):
-        tr.comments[f"fixed[{i}]"] = c
-    sc.fixed = fixed
+    if fixed:
+        tr.problem["fixed"] = [e for e, _ in fixed]
+        for i, (_, c) in enumerate(fixed):
+            tr.comments[f"fixed[{i}]"] = c
+    if springs:
+        tr.problem["springs"] = [e for e, _ in springs]
+        for i, (_, c) in enumerate(springs):
+            tr.comments[f"springs[{i}]"] = c
+    sc.fixed = fixed + [(e["nodes"], c) for e, c in springs]
+
+
+def _spring_stiffness(sc: _Scene, o: Object) -> float | None:
+    """A RestShapeSpringsForceField's stiffness in N/m if it holds softly, None if it is a support (see
+    :data:`STIFF_SPRINGS`); one value per point is averaged, with a note."""
+    k = _floats(o.data.get("stiffness", 1.0))
+    if k.size > 1 and np.ptp(k) > 1e-9 * abs(k).max():
+        sc.tr.notes.append(f"RestShapeSpringsForceField '{o.name}': one stiffness per point, their mean used")
+    k_si = float(k.mean()) * sc.mass  # N/m per (scene force / scene length) = kg/s^2
+    E = sc.tr.problem["material"]["young_modulus"]
+    h = _mean_edge(sc.X[sc.tets] if sc.tets is not None else sc.X) * sc.length
+    return None if k_si >= STIFF_SPRINGS * E * h else float(f"{k_si:.6g}")
+
+
+def _mean_edge(corners: np.ndarray) -> float:
+    """The mean edge of tetrahedra (m, 4, 3), or a size scale of a point cloud (k, 3)."""
+    if corners.ndim == 2:
+        return float(np.linalg.norm(np.ptp(corners, axis=0))) / max(len(corners) ** (1 / 3), 1.0)
+    pairs = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+    return float(np.mean([np.linalg.norm(corners[:, a] - corners[:, b], axis=1) for a, b in pairs]))
 
 
 def _actuators(sc: _Scene) -> None:
@@ -386,6 +435,89 @@ def _actuators(sc: _Scene) -> None:
         tr.problem["cables"] = cables
     if cavities:
         tr.problem["cavities"] = cavities
+
+
+def _loads(sc: _Scene) -> None:
+    """``ConstantForceField`` on the body's points: ``loads`` (a force on each point: ``forces`` one per index,
+    ``force`` the same on each, ``totalForce`` shared equally); ``SurfacePressureForceField`` on a surface whose
+    vertices are the body's points: ``pressure_loads``."""
+    tr, L, X = sc.tr, sc.length, sc.X
+    loads, pressures = [], []
+    for o in _objects(sc.body, ("ConstantForceField",)):
+        idx = _ints(o.data["indices"]) if o.data.get("indices") is not None else np.flatnonzero(sc.in_tets).tolist()
+        if any(i >= len(X) for i in idx):
+            sc.fail(f"ConstantForceField '{o.name}': an index is beyond the body's {len(X)} points")
+        if o.data.get("forces") is not None:
+            f = _flat_points(o.data["forces"])
+            f = np.repeat(f, len(idx), axis=0) if len(f) == 1 else f
+        elif o.data.get("totalForce") is not None:
+            f = np.repeat(_flat_points(o.data["totalForce"]) / len(idx), len(idx), axis=0)
+        elif o.data.get("force") is not None:
+            f = np.repeat(_flat_points(o.data["force"]), len(idx), axis=0)
+        else:
+            continue
+        if len(f) != len(idx):
+            sc.fail(f"ConstantForceField '{o.name}': {len(f)} forces for {len(idx)} indices")
+        sc.used.add(id(o))
+        loads += [{"point": (X[i] * L).tolist(), "force": (fi * sc.force).tolist()} for i, fi in zip(idx, f)
+                  if np.any(fi) and sc.in_tets[i]]
+        tr.comments["loads"] = f"ConstantForceField '{o.name}' ({len(idx)} points)"
+    for node in sc.body.walk():
+        for o in _objects(node, ("SurfacePressureForceField",)):
+            entry = _surface_pressure(sc, node, o)
+            if entry is not None:
+                sc.used.add(id(o))
+                pressures.append(entry)
+    if loads:
+        tr.problem["loads"] = loads
+    if pressures:
+        tr.problem["pressure_loads"] = pressures
+
+
+def _surface_pressure(sc: _Scene, node: Node, o: Object) -> dict | None:
+    """A SurfacePressureForceField's surface (its node's loader, else the body's boundary: ``triangleIndices``
+    not translated) as the body's nodes, and its pressure in the problem's sign: SOFA pushes along each
+    triangle's winding normal, casadi-ws into the body."""
+    from ...fem.mesh import Mesh
+    from ...fem.surface import boundary_faces
+
+    if sc.tets is None:
+        return None
+    loaders = [x for x in node.objects if x.type in _LOADERS and x.data.get("filename")]
+    if not loaders or node is sc.body:
+        sc.tr.notes.append(f"SurfacePressureForceField '{o.name}': only one on a surface loader of its own is "
+                           "translated; not translated")
+        return None
+    ld = loaders[0]
+    sc.used.add(id(ld))
+    pts, _, _, raw = _loader_points(sc, ld, sc.length)
+    tris = np.concatenate([np.asarray(c.data)[:, :3] for c in raw.cells if c.type == "triangle"] +
+                          [np.zeros((0, 3), dtype=np.int64)])
+    size = float(np.linalg.norm(np.ptp(sc.X, axis=0)))
+    d = np.linalg.norm(pts[:, None, :] - sc.X[None, :, :], axis=2) if len(pts) * len(sc.X) < 5e7 else None
+    if d is None or len(tris) == 0:
+        sc.fail(f"SurfacePressureForceField '{o.name}': its surface {ld.name} has no triangles or is too large")
+    near = d.argmin(axis=1)
+    if np.any(d[np.arange(len(pts)), near] > 1e-6 * size):
+        sc.fail(f"SurfacePressureForceField '{o.name}': the vertices of {ld.name} are not points of the body (a "
+                f"pressure on an embedded surface is not translated)")
+    faces = near[tris]
+    mesh = Mesh(sc.X, sc.tets)
+    outward = boundary_faces(mesh)
+    key = {tuple(sorted(f)): f for f in outward.tolist()}
+    same = []
+    for f in faces.tolist():
+        b = key.get(tuple(sorted(f)))
+        if b is None:
+            sc.fail(f"SurfacePressureForceField '{o.name}': a triangle of {ld.name} is not on the body's boundary")
+        same.append(any(f == b[k:] + b[:k] for k in range(3)))
+    if 0 < sum(same) < len(same):
+        sc.fail(f"SurfacePressureForceField '{o.name}': the triangles of {ld.name} are not wound alike")
+    p = _num(o.data.get("pressure"), 0.0) * sc.stress
+    if o.data.get("pulseMode") is not None and _bool(o.data.get("pulseMode"), False):
+        sc.tr.notes.append(f"SurfacePressureForceField '{o.name}': pulseMode ignored (a constant pressure)")
+    return {"name": o.name, "surface": {"indices": sorted(set(np.unique(faces).tolist()))},
+            "pressure": float(f"{(-p if same[0] else p):.6g}")}
 
 
 def _effector(sc: _Scene) -> None:
