@@ -130,8 +130,8 @@ class _ResidualFunctions:
         self.m = m = model
         self.with_load = with_load
         n, nu = m.n_free, m.n_u
-        rows = m._k_rows.astype(np.int64)
-        cols = np.repeat(np.arange(n), np.diff(m._k_indptr))
+        keys = m.pattern_keys()  # sorted column * n + row: K's CSC order
+        rows, cols = keys % n, keys // n
         self.K = _Pattern((n, n), rows, cols)
         # dR/du_a is nonzero where the terms say: the free dofs that move actuator a's points, or a prescribed
         # quantity's own equation

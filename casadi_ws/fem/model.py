@@ -205,7 +205,7 @@ class StaticModel:
 
     # ------------------------------------------------------------------ the sums
     def _residual(self, s: Evaluation):
-        """(R on the free dofs, the applied loads there, the rows terms' caches) at s."""
+        """(R on the free dofs, the applied loads there (with ``s.with_scale``), the rows terms' caches) at s."""
         f = None
         for t in self._internal:
             part = t.forces(self, s)
@@ -219,12 +219,13 @@ class StaticModel:
         R = f[self.free] + ext
         caches = {}
         for t in self._with_rows:
-            R0 = R.copy() if t.applied else None
+            R0 = R.copy() if s.with_scale and t.applied else None
             caches[t] = t.residual(self, s.q, s.u, R)
-            if t.applied:
+            if R0 is not None:
                 ext = ext + (R0 - R)  # the contact forces join the applied ones in the scale
-        for t in self._with_rows:
-            ext[t.rows] = 0.0
+        if s.with_scale:
+            for t in self._with_rows:
+                ext[t.rows] = 0.0
         return R, ext, caches
 
     def residual(self, q: np.ndarray, u: np.ndarray, load: float = 1.0, with_scale: bool = False):

@@ -37,7 +37,7 @@ def complementarity(a, b, eps, unilateral=True) -> tuple:
     ``unilateral`` (a cable, a contact point) phi(a, b) = 0 holds a >= 0, b >= 0, a b = eps^2 / 2; elsewhere
     (a chamber's volume) the row is b = 0."""
     fb = fischer_burmeister(a, b, eps)
-    if unilateral is True:
+    if unilateral is True or np.all(unilateral):
         return fb
     one, zero = np.ones_like(a), np.zeros_like(a)
     return tuple(np.where(unilateral, f, bil) for f, bil in zip(fb, (b, zero, one, zero, zero, zero)))
