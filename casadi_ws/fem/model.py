@@ -260,10 +260,10 @@ class StaticModel:
         return self._tangent(s, {})
 
     def _tangent(self, s: Evaluation, caches: dict) -> sp.csc_matrix:
-        data = np.zeros(self.nnz + 1)  # the last entry collects those of fixed dofs
+        data = None  # the values on the pattern, and last what falls on fixed dofs
         for t in self.terms:
-            t.add_tangent(self, s, caches.get(t), data)
-        return self.matrix(data)
+            data = t.add_tangent(self, s, caches.get(t), data)
+        return self.matrix(np.zeros(self.nnz + 1) if data is None else data)
 
     def _input_jacobian(self, s: Evaluation) -> np.ndarray:
         dRdu = np.zeros((self.n_free, self.n_u))

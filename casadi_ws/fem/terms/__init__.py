@@ -9,7 +9,7 @@ module here with a :class:`Term` and a reader of its problem-file key (docs/meth
 import numpy as np
 
 from .actuators import ActuatorData, Actuators
-from .base import Evaluation, Term, complementarity, fischer_burmeister, held_block, point_pairs
+from .base import Evaluation, Term, complementarity, fischer_burmeister, held_block, point_pairs, tangent_data
 from .contact import ContactGeometry, ContactTerm, ObstacleContact
 from .elements import ElementGroup, Elements
 from .loads import Loads

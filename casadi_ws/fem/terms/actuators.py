@@ -18,7 +18,7 @@ import scipy.sparse as sp
 
 from ...actuation.base import quantity_functions, third_function
 from ..kernels import ElementBatch
-from .base import Evaluation, Term
+from .base import Evaluation, Term, tangent_data
 
 __all__ = ["ActuatorData", "Actuators"]
 
@@ -207,12 +207,14 @@ class Actuators(Term):
 
     def add_tangent(self, model, s, cache, data):
         if not self.data:
-            return
+            return data
         h = self._at(s)[2] if s.tangent else self.terms(s.q, hessians=True)[2]
         coef = -self.sign * model.intensities(s.q, s.u)  # R holds -sign_a t_a dQ_a/dq
         weights = coef[self._act_of_entry] * self._h_weight * h[self._h_index]
         if weights.size:
+            data = tangent_data(model, data)
             data[: model.nnz] += np.bincount(self._slots, weights=weights, minlength=model.nnz)
+        return data
 
     def input_jacobian(self, model, s, dRdu):
         _, dQ, _ = self._at(s)

@@ -20,7 +20,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["Evaluation", "Term", "complementarity", "fischer_burmeister", "held_block", "point_pairs"]
+__all__ = ["Evaluation", "Term", "complementarity", "fischer_burmeister", "held_block", "point_pairs",
+           "tangent_data"]
 
 
 def fischer_burmeister(a, b, eps):
@@ -59,6 +60,11 @@ def held_block(coef, pt, fpos, val, pairs, n) -> sp.csc_matrix:
     cable, a pressing contact point: coef = 1e3 kappa dphi/db, 1000x stiffer than the row's own scale)."""
     e1, e2 = pairs
     return sp.csc_matrix((coef[pt[e1]] * val[e1] * val[e2], (fpos[e1], fpos[e2])), shape=(n, n))
+
+
+def tangent_data(model, data: np.ndarray | None) -> np.ndarray:
+    """``data``, or the zeros of the pattern's values (nnz + 1) where it is None (:meth:`Term.add_tangent`)."""
+    return np.zeros(model.nnz + 1) if data is None else data
 
 
 @dataclass
@@ -140,12 +146,16 @@ class Term:
         """(keys, values) of dR/dq it contributes (keys a subset of :meth:`pattern`; repeated keys add)."""
         return np.zeros(0, dtype=np.int64), np.zeros(0)
 
-    def add_tangent(self, model, s: Evaluation, cache, data: np.ndarray) -> None:
-        """Add its entries of K into the pattern's ``data`` (its length nnz + 1: the last entry collects
-        those of fixed dofs). Default: :meth:`tangent`'s (keys, values) at their slots."""
+    def add_tangent(self, model, s: Evaluation, cache, data: np.ndarray | None) -> np.ndarray | None:
+        """``data`` with its entries of K added: the values on the pattern (length nnz + 1: the last entry
+        collects those of fixed dofs), None where no term has given any yet (the first may then return its own
+        array: the elements' 1.4 MB on the trunk are not added to zeros). Default: :meth:`tangent`'s
+        (keys, values) at their slots."""
         keys, values = self.tangent(model, cache)
         if keys.size:
+            data = tangent_data(model, data)
             data[: model.nnz] += np.bincount(model.slots(keys), weights=values, minlength=model.nnz)
+        return data
 
     def input_jacobian(self, model, s: Evaluation, dRdu: np.ndarray) -> None:
         """Change dR/du (n_free, n_u) by its share (in place)."""

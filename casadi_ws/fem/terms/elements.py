@@ -196,7 +196,8 @@ class Elements(Term):
         return data
 
     def add_tangent(self, model, s, cache, data):
-        data += self.stiffness_data(s.q, model.nnz)
+        part = self.stiffness_data(s.q, model.nnz)
+        return part if data is None else data + part
 
     def hessian_vector_function(self, group: int = 0):
         """The element function of d(K_e^T lam_e)/du_e (for the NLPs' Hessians) of the elements of a law,

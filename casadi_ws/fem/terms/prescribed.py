@@ -23,7 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..spec import ModelError
-from .base import Term, complementarity, held_block, point_pairs
+from .base import Term, complementarity, held_block, point_pairs, tangent_data
 
 __all__ = ["Prescribed"]
 
@@ -128,7 +128,8 @@ class Prescribed(Term):
 
     def add_tangent(self, model, s, cache, data):
         if not self.n_rows:
-            return
+            return data
+        data = tangent_data(model, data)
         Q, dQ, _ = model.actuators_term._at(s)
         _, pa, pb, *_ = self.rows_at(model, s.q, s.u, Q)
         H = (dQ * model.sign[:, None])[:, model.free]
@@ -136,6 +137,7 @@ class Prescribed(Term):
             kap = self.kappa[k]
             cs, rs, ds = self._border_slots[k]
             data[cs], data[rs], data[ds] = -kap * H[a, r], pb[k] * kap * H[a, r], kap * pa[k]
+        return data
 
     def input_jacobian(self, model, s, dRdu):
         if not self.n_rows:

@@ -26,7 +26,7 @@ import scipy.sparse as sp
 
 from ...actuation.cavity import _QP, _QW, _triangle6_basis
 from ..kernels import ElementBatch
-from .base import Term
+from .base import Term, tangent_data
 
 __all__ = ["PressureLoad", "face_force_function"]
 
@@ -102,8 +102,10 @@ class PressureLoad(Term):
         J = s.memo.get(self)
         if J is None:
             J = self._force(self._faces(model, s.q))[1]
+        data = tangent_data(model, data)
         data[: model.nnz] += np.bincount(model.slots(self._keys), weights=(s.load * self.pressure) *
                                          J.reshape(-1)[self._keep], minlength=model.nnz)
+        return data
 
     def hessian(self, model, q, u, lam):
         lam_full = np.zeros(model.n_dof)
