@@ -271,7 +271,10 @@ def test_bad_scenes_give_one_line_and_exit_2(tmp_path):
     _box_file(tmp_path)
     cases = {
         "no_create.py": ("x = 1\n", "defines no createScene"),
-        "imports.py": ("import stlib3.animation\ndef createScene(root):\n    pass\n", "imports 'stlib3.animation'"),
+        # an unknown module runs as stubs: what is left to refuse is the scene itself
+        "imports.py": ("import stlib3.animation\ndef createScene(root):\n    pass\n",
+                       "no node holds a TetrahedronFEMForceField"),
+        "syntax.py": ("def createScene(root)\n    pass\n", "createScene failed: SyntaxError"),
         "raises.py": ("def createScene(root):\n    root.nothing.addObject('A')\n", "createScene failed (line 2)"),
         "no_body.py": ("def createScene(root):\n    root.addObject('FreeMotionAnimationLoop')\n",
                        "no node holds a TetrahedronFEMForceField"),
@@ -477,3 +480,79 @@ def test_sofa_soft_springs_constant_forces_and_surface_pressure(tmp_path):
     assert isinstance(springs, Springs) and isinstance(load, PressureLoad) and len(load.faces) == len(side)
     eq = solve_equilibrium(StaticModel(p), p.u_min)
     assert eq.converged and (eq.tip - p.end_effector)[0] > 1e-4  # the side pulled out along +x
+
+
+# ----------------------------------------------------------------------------------------------- any scene
+def test_node_data_read_before_set_key_modules_and_unknown_modules_run_as_stubs(tmp_path):
+    """A scene reads root.dt.value before setting it, writes gravity through .value, imports Key as a module,
+    splib3.loaders, a decorator and a module the stand-in does not know: it runs, the robot is translated, and
+    the stubbed names are listed."""
+    _box_file(tmp_path)
+    body = _BODY.format(transform="")
+    head = """\
+    import Sofa.constants.Key as Key
+    from splib3.loaders import getLoadingLocation
+    from splib3.objectmodel import SofaPrefab
+    import some_plugin_nobody_has
+    some_plugin_nobody_has.configure(root, level=3)
+    root.dt.value = root.dt.value / 2
+    root.gravity.value = [0, -9810, 0]
+    assert Key.uparrow and getLoadingLocation("block.vtk", __file__).endswith("block.vtk")
+
+    @SofaPrefab
+    class Decor:
+        pass
+    Decor()
+    """
+    tr = translate(_scene(tmp_path, textwrap.dedent(head) + body, gravity="None"), out_dir=tmp_path)
+    assert tr.units == "mm-kg-s" and "cables" in tr.problem
+    (note,) = [n for n in tr.notes if n.startswith("run as stubs")]
+    assert "some_plugin_nobody_has" in note and "splib3.objectmodel" in note
+
+
+def test_the_mechanical_object_places_the_body_and_boxes_select_on_the_placed_points(tmp_path):
+    """DiamondRobot's MechanicalObject turns its mesh (rx=90, dz=35): the BoxROIs select on the placed points,
+    and an empty selection is one line, not a traceback."""
+    _, m = _box_file(tmp_path)
+    body = _BODY.format(transform="").replace(
+        "body.addObject('MechanicalObject', name='dofs')", "body.addObject('MechanicalObject', name='dofs', rx=90, dz=35)")
+    # turned 90 deg about x, the block's z = 0 face lies at y = 0, then moved to z = 35 +- 5
+    body = body.replace("box=[-6, -6, -1, 6, 6, 0.1]", "box=[6, 0.1, 29, -6, -1, 41]")  # corners swapped: SOFA sorts
+    body = body.replace("[4, 0, 5], [4, 0, 20], [4, 0, 35]", "[4, -5, 35], [4, -20, 35], [4, -35, 35]")
+    body = body.replace("pullPoint=[4, 0, 0]", "pullPoint=[4, 0, 35]")
+    tr = translate(_scene(tmp_path, body), out_dir=tmp_path)
+    p = _load(tr, tmp_path)
+    assert tr.problem["mesh"]["transform"] == {"rotation": [90.0, 0.0, 0.0], "translation": [0.0, 0.0, 0.035]}
+    assert sorted(p.fixed_nodes.tolist()) == np.flatnonzero(m.nodes[:, 2] <= 0.1).tolist()
+    assert np.allclose(p.mesh.nodes[:, 1].max(), 0.0) and np.allclose(p.mesh.nodes[:, 2].mean(), 0.035)
+    far = body.replace("box=[6, 0.1, 29, -6, -1, 41]", "box=[-6, -6, -1, 6, 6, 0.1]")
+    with pytest.raises(SceneError, match=r"FixedConstraint .* holds no point of the body \(the body spans"):
+        translate(_scene(tmp_path, far), out_dir=tmp_path)
+
+
+def test_gravity_with_a_typo_picks_its_units_with_a_note(tmp_path):
+    _box_file(tmp_path)
+    tr = translate(_scene(tmp_path, _BODY.format(transform=""), gravity="[0, -9180, 0]"), out_dir=tmp_path)
+    assert tr.units == "mm-kg-s" and any("6% off 9810: a typo?" in n for n in tr.notes)
+    with pytest.raises(SceneError, match="cannot tell the units"):
+        translate(_scene(tmp_path, _BODY.format(transform=""), gravity="[0, -5000, 0]"), out_dir=tmp_path)
+
+
+def test_stlib_scene_header_children_and_a_second_robot(tmp_path):
+    """stlib3's Scene creates Settings, Modelling and Simulation; a scene of two fingers translates the first
+    with its own cable and lists the other's."""
+    _box_file(tmp_path)
+    body = _BODY.format(transform="")
+    two = body + body.replace("body.", "body2.").replace("cable = body2", "cable = body2").replace(
+        "cable.", "cable2.").replace("cable2 = ", "").replace("cable = body2.addChild('cable')",
+                                                               "cable2 = body2.addChild('cable')")
+    head = """\
+    from stlib3.scene import Scene
+    scene = Scene(root, gravity=[0, -9810, 0])
+    scene.addMainHeader()
+    scene.Simulation.addObject('GenericConstraintSolver')
+    body2 = root.addChild('body2')
+    """
+    tr = translate(_scene(tmp_path, textwrap.dedent(head) + two), out_dir=tmp_path)
+    assert len(tr.problem["cables"]) == 1
+    assert any("at /body2/cable acts on another body: not translated" in n for n in tr.notes)

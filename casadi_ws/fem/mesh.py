@@ -155,7 +155,33 @@ def read_meshio(path: str | Path):
         except (Exception, SystemExit) as exc:  # meshio raises many kinds, and exits on some unreadable files
             text = chatter.getvalue().strip() if isinstance(exc, SystemExit) else str(exc).strip()
             last = text.splitlines()[-1] if text else type(exc).__name__
+    if path.suffix.lower() == ".obj":
+        obj = _read_obj(path)
+        if obj is not None:
+            return obj
     raise MeshError(f"{path}: could not be read as a mesh ({last})")
+
+
+def _read_obj(path: Path):
+    """The vertices and faces (fanned into triangles) of a Wavefront OBJ that meshio refuses (texture
+    coordinates counted unlike the vertices, as SoftRobots' bunny cavity has), or None."""
+    import meshio
+
+    v, tri = [], []
+    try:
+        for line in path.read_text(errors="replace").splitlines():
+            s = line.split()
+            if s and s[0] == "v":
+                v.append([float(x) for x in s[1:4]])
+            elif s and s[0] == "f":
+                ids = [int(x.split("/")[0]) for x in s[1:]]
+                ids = [i - 1 if i > 0 else len(v) + i for i in ids]  # OBJ counts from 1, negatives from the end
+                tri += [[ids[0], ids[k], ids[k + 1]] for k in range(1, len(ids) - 1)]
+    except ValueError:
+        return None
+    if not v or not tri or max(max(t) for t in tri) >= len(v):
+        return None
+    return meshio.Mesh(np.asarray(v, dtype=float), [("triangle", np.asarray(tri, dtype=np.int64))])
 
 
 def load_mesh(path: str | Path, scale: float = 1.0, transform=None) -> Mesh:

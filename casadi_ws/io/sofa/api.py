@@ -9,7 +9,13 @@ import types
 
 import numpy as np
 
-__all__ = ["Controller", "Data", "Node", "Object", "SceneError", "stand_in_modules"]
+__all__ = ["Controller", "Data", "Node", "Object", "SceneError", "Stub", "stand_in_modules", "stub_missing",
+           "stubbed_module"]
+
+NODE_DEFAULTS = {"gravity": [0.0, -9.81, 0.0], "dt": 0.01, "time": 0.0, "animate": False, "bbox": None,
+                 "activated": True}
+"""SOFA's built-in node data and their defaults: a scene may read one it never set (``root.dt.value``); only
+those written are recorded (so an unset gravity stays unset for the units' rule)."""
 
 
 class SceneError(ValueError):
@@ -40,6 +46,13 @@ class Data:
     def getValueString(self) -> str:  # noqa: N802
         return str(self.value)
 
+    def setParent(self, other):  # noqa: N802
+        """A link to another data (SOFA's data engine graph): its value now, as the recording's."""
+        if isinstance(other, Data):
+            self.value = other.value
+        elif isinstance(other, str):
+            self.value = other
+
     def __getitem__(self, i):
         return self.value[i]
 
@@ -48,6 +61,21 @@ class Data:
 
     def __repr__(self):
         return f"Data({self.getLinkPath()}={self.value!r})"
+
+
+class _NodeData(Data):
+    """A built-in data of a node (:data:`NODE_DEFAULTS`): reads SOFA's default until written."""
+
+    def __init__(self, owner, name: str):
+        self.__dict__.update(owner=owner, name=name)
+
+    @property
+    def value(self):
+        return self.owner.__dict__["data"].get(self.name, NODE_DEFAULTS.get(self.name))
+
+    @value.setter
+    def value(self, v):
+        self.owner.__dict__["data"][self.name] = v.value if isinstance(v, Data) else v
 
 
 class Object:
@@ -139,9 +167,26 @@ class Node:
         return self
 
     def findData(self, name):  # noqa: N802
+        if name in NODE_DEFAULTS and name not in self.data:
+            return _NodeData(self, name)
         return Data(self, name)
 
     getData = findData
+
+    def getMechanicalState(self):  # noqa: N802
+        return next((o for o in self.objects if o.type == "MechanicalObject"), None)
+
+    def getChildren(self):  # noqa: N802
+        return list(self.children)
+
+    def getObjects(self):  # noqa: N802
+        return list(self.objects)
+
+    def hasObject(self, name) -> bool:  # noqa: N802
+        return self.getObject(name) is not None
+
+    def getPathName(self) -> str:  # noqa: N802
+        return self.path() or "/"
 
     def getLinkPath(self) -> str:  # noqa: N802
         return f"@{self.path()}"
@@ -160,6 +205,8 @@ class Node:
                 return o
         if name in self.data:
             return Data(self, name)
+        if name in NODE_DEFAULTS:
+            return _NodeData(self, name)
         raise AttributeError(f"node '{self.path() or '/'}' has no child, object or data named '{name}'")
 
     def __setattr__(self, name, value):
@@ -191,8 +238,78 @@ class Controller:
     def name(self) -> str:
         return str(self.data.get("name", type(self).__name__))
 
+    def __setattr__(self, name, value):
+        if name == "name":  # a controller naming itself in its __init__ (self.name = "...")
+            self.__dict__["data"]["name"] = value.value if isinstance(value, Data) else value
+        else:
+            object.__setattr__(self, name, value)
+
     def path(self) -> str:
         return f"{self.parent.path()}/{self.name}" if self.parent is not None else self.name
+
+
+class Stub:
+    """What a scene gets from a module or name the stand-in does not know (``splib3.objectmodel``, a helper of
+    another plugin): calls and attributes give stubs, a decorator gives back what it decorates, a class may
+    derive from it. The scene's own code runs on; what the stubs would have built is not recorded, and the
+    translation lists the stubbed names (:func:`stubbed_module`)."""
+
+    def __init__(self, name: str, used: set):
+        self.__dict__.update(_name=name, _used=used)
+        used.add(name.split("(")[0])
+
+    def __getattr__(self, attr):
+        if attr.startswith("__"):
+            raise AttributeError(attr)
+        return Stub(f"{self._name}.{attr}", self._used)
+
+    def __setattr__(self, attr, value):
+        pass
+
+    def __call__(self, *args, **kwargs):
+        if len(args) == 1 and not kwargs and isinstance(args[0], type) or (
+                len(args) == 1 and not kwargs and callable(args[0]) and hasattr(args[0], "__code__")):
+            return args[0]  # a decorator (@SofaPrefab): the class or function itself
+        return Stub(f"{self._name}()", self._used)
+
+    def __mro_entries__(self, bases):
+        return (object,)
+
+    def __iter__(self):
+        return iter(())
+
+    def __len__(self):
+        return 0
+
+    def __bool__(self):
+        return False
+
+    def __getitem__(self, i):
+        return Stub(f"{self._name}[]", self._used)
+
+    def __repr__(self):
+        return f"<stub {self._name}>"
+
+
+def stubbed_module(name: str, used: set, **attrs) -> types.ModuleType:
+    """A module whose missing names are :class:`Stub` s (their names added to ``used``)."""
+    m = _module(name, **attrs)
+    m.__path__ = []  # a package: its submodules may be imported too
+    stub_missing(m, used)
+    return m
+
+
+def stub_missing(module: types.ModuleType, used: set) -> None:
+    """Make ``module``'s missing names :class:`Stub` s (``from stlib3.scene import Node`` where the stand-in
+    lacks it)."""
+    def missing(attr):
+        if attr.startswith("__"):
+            raise AttributeError(attr)
+        return Stub(f"{module.__name__}.{attr}", used)
+
+    module.__getattr__ = missing
+    if not hasattr(module, "__path__"):
+        module.__path__ = []  # a package: an unknown submodule (stlib3.physics.rigid) reaches the stub finder
 
 
 class _Vec3(list):
@@ -264,7 +381,8 @@ def stand_in_modules() -> dict[str, types.ModuleType]:
     helper = _module("Sofa.Helper", msg_info=noop, msg_warning=noop, msg_error=noop, msg_deprecated=noop,
                      System=types.SimpleNamespace(addDataPath=noop, DataRepository=types.SimpleNamespace(
                          addFirstPath=noop, addLastPath=noop)))
-    constants = _module("Sofa.constants", Key=key)
+    key_module = _module("Sofa.constants.Key", **vars(key))
+    constants = _module("Sofa.constants", Key=key_module, KeyCode=key_module)
     sofa = _module("Sofa", Core=core, Simulation=simulation, Helper=helper, constants=constants,
                    msg_info=noop, msg_warning=noop, msg_error=noop, msg_deprecated=noop)
     runtime = _module("SofaRuntime", importPlugin=noop, PluginRepository=types.SimpleNamespace(addFirstPath=noop))
@@ -273,7 +391,31 @@ def stand_in_modules() -> dict[str, types.ModuleType]:
                        RigidDof=object)
     animation = _module("splib3.animation", animate=noop, AnimationManager=noop,
                         AnimationManagerController=Controller)
-    splib3 = _module("splib3", numerics=numerics, animation=animation)
+    splib3_constants = _module("splib3.constants", Key=key_module, KeyCode=key_module)
+    loaders = _module("splib3.loaders", getLoadingLocation=_loading_location, loadPointListFromFile=_point_list)
+    splib3 = _module("splib3", numerics=numerics, animation=animation, constants=splib3_constants, loaders=loaders)
     return {"Sofa": sofa, "Sofa.Core": core, "Sofa.Simulation": simulation, "Sofa.Helper": helper,
-            "Sofa.constants": constants, "SofaRuntime": runtime, "splib3": splib3, "splib3.numerics": numerics,
-            "splib3.animation": animation}
+            "Sofa.constants": constants, "Sofa.constants.Key": key_module, "Sofa.constants.KeyCode": key_module,
+            "SofaRuntime": runtime, "splib3": splib3, "splib3.numerics": numerics,
+            "splib3.numerics.vec3": numerics.vec3, "splib3.numerics.quat": numerics.quat,
+            "splib3.animation": animation, "splib3.constants": splib3_constants,
+            "splib3.constants.Key": key_module, "splib3.loaders": loaders}
+
+
+def _loading_location(filename, source=None):
+    """splib3.loaders.getLoadingLocation: ``filename`` beside the file (or in the folder) ``source``."""
+    import os
+
+    if source is None:
+        return filename
+    if os.path.isfile(source):
+        source = os.path.dirname(os.path.abspath(source))
+    return os.path.join(source, filename)
+
+
+def _point_list(path):
+    """splib3.loaders.loadPointListFromFile: a JSON list of points."""
+    import json
+
+    with open(path) as f:
+        return json.load(f)

@@ -81,8 +81,9 @@ class VisualModel(Prefab):
         self.addObject("OglModel", name="OglModel", src="@loader")
 
 
-def CollisionMesh(surfaceMeshFileName=None, name="collision", attachedTo=None, **kwargs):  # noqa: N802
-    """stlib3.physics.collision.CollisionMesh: a surface with collision models."""
+def CollisionMesh(attachedTo=None, surfaceMeshFileName=None, name="collision", **kwargs):  # noqa: N802
+    """stlib3.physics.collision.CollisionMesh(attachedTo, surfaceMeshFileName, name, rotation, translation,
+    collisionGroup, mappingType): a surface with collision models (listed as not translated)."""
     node = attachedTo.addChild(name)
     node.addObject("MeshSTLLoader" if not str(surfaceMeshFileName).endswith(".obj") else "MeshOBJLoader",
                    name="loader", filename=surfaceMeshFileName)
@@ -140,11 +141,28 @@ def _scene(root, gravity=(0.0, -9.81, 0.0), dt=0.01, plugins=(), repositoryPaths
     root.data["gravity"] = list(gravity)
     root.data["dt"] = dt
     root.addObject("VisualStyle", name="VisualStyle")
-    root.__dict__["addMainHeader"] = lambda *a, **k: None
-    root.__dict__["addSettings"] = lambda *a, **k: root.addChild("Settings")
-    root.__dict__["addModelling"] = lambda *a, **k: root.addChild("Modelling")
-    root.__dict__["addSimulation"] = lambda *a, **k: root.addChild("Simulation")
-    root.__dict__["addContact"] = lambda *a, **k: ContactHeader(root, *a, **k)
+
+    def child(name):  # STLIB's Scene keeps one of each (a scene may ask twice)
+        return root.getChild(name) or root.addChild(name)
+
+    def add_solver(node):
+        node.addObject("EulerImplicitSolver", name="TimeIntegrationSchema")
+        node.addObject("CGLinearSolver" if iterative else "SparseLDLSolver", name="LinearSolver")
+        return node
+
+    def add_simulation(*a, **k):
+        sim = child("Simulation")
+        if not sim.objects:
+            add_solver(sim)
+        return sim
+
+    def add_main_header(*a, **k):
+        child("Settings"), child("Modelling"), add_simulation()
+        return root
+
+    root.__dict__.update(addMainHeader=add_main_header, addSettings=lambda *a, **k: child("Settings"),
+                         addModelling=lambda *a, **k: child("Modelling"), addSimulation=add_simulation,
+                         addSolver=add_solver, addContact=lambda *a, **k: ContactHeader(root, *a, **k))
     return root
 
 

@@ -19,21 +19,45 @@ import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from .api import Data, Node, Object, SceneError, stand_in_modules
+from .api import Data, Node, Object, SceneError, stand_in_modules, stub_missing, stubbed_module
 from .prefabs import stand_in_modules as prefab_modules
 
 __all__ = ["Data", "Node", "Object", "SceneError", "record"]
 
 
+class _StubFinder:
+    """Last on ``sys.meta_path`` while a scene runs: a module nothing else finds (another plugin's helpers,
+    ``splib3.objectmodel``, ``rclpy``) is a module of stubs (:class:`Stub`) rather than an ImportError."""
+
+    def __init__(self, used: set):
+        self.used, self.made = used, []
+
+    def find_spec(self, name, path=None, target=None):
+        return importlib.util.spec_from_loader(name, self)
+
+    def create_module(self, spec):
+        self.made.append(spec.name)
+        self.used.add(spec.name)
+        return stubbed_module(spec.name, self.used)
+
+    def exec_module(self, module):
+        pass
+
+
 @contextlib.contextmanager
-def _installed(modules: dict, scene_dir: Path):
+def _installed(modules: dict, scene_dir: Path, used: set):
     saved = {k: sys.modules.get(k) for k in modules}
     sys.modules.update(modules)
     sys.path.insert(0, str(scene_dir))
+    finder = _StubFinder(used)
+    sys.meta_path.append(finder)
     before = set(sys.modules)
     try:
         yield
     finally:
+        sys.meta_path.remove(finder)
+        for k in finder.made:
+            sys.modules.pop(k, None)
         sys.path.remove(str(scene_dir))
         for k, v in saved.items():
             if v is None:
@@ -56,12 +80,15 @@ def record(path: str | Path) -> Node:
         return _parse_xml(path)
     modules = stand_in_modules()
     modules.update(prefab_modules(modules))
+    used: set[str] = set()
+    for m in modules.values():
+        stub_missing(m, used)
     spec = importlib.util.spec_from_loader(f"_casadi_ws_scene_{abs(hash(str(path)))}", loader=None)
     module = importlib.util.module_from_spec(spec)
     module.__file__ = str(path.resolve())
     root = Node("root")
     out = io.StringIO()
-    with _installed(modules, path.resolve().parent), contextlib.redirect_stdout(out):
+    with _installed(modules, path.resolve().parent, used), contextlib.redirect_stdout(out):
         try:
             code = compile(path.read_text(), str(path), "exec")
             exec(code, module.__dict__)  # noqa: S102 - the user's scene, run on purpose
@@ -83,6 +110,7 @@ def record(path: str | Path) -> Node:
                 tb = tb.tb_next
             where = f" (line {line})" if line else ""
             raise SceneError(f"{path}: createScene failed{where}: {type(exc).__name__}: {exc}") from None
+    root.__dict__["stubbed"] = sorted(used)
     return root
 
 

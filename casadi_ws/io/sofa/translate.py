@@ -39,6 +39,10 @@ from .recorder import record
 
 __all__ = ["UNIT_SYSTEMS", "Translation", "import_scene", "translate"]
 
+UNITS_TOLERANCE = 0.10
+"""Gravity within this share of 9.81, 981 or 9810 picks m, cm or mm (SoftRobots' scenes carry -9180 for -9810:
+SOFA runs them as written; the note says so)."""
+
 UNIT_SYSTEMS = {"m-kg-s": (1.0, 1.0), "mm-kg-s": (1e-3, 1.0), "mm-g-s": (1e-3, 1e-3), "cm-kg-s": (1e-2, 1.0)}
 """Unit systems of SOFA scenes: (metres per length unit, kilograms per mass unit); seconds throughout."""
 
@@ -226,8 +230,10 @@ def _units(scene: _Scene, units: str | None, notes: list) -> str:
         return "m-kg-s"
     mag = float(np.linalg.norm(_flat_points(g)[0]))
     for name, expect in (("m-kg-s", 9.81), ("mm-kg-s", 9810.0), ("cm-kg-s", 981.0)):
-        if abs(mag - expect) <= 0.02 * expect:
-            notes.append(f"units {name} (from gravity's magnitude {mag:g}); masses read as "
+        if abs(mag - expect) <= UNITS_TOLERANCE * expect:
+            off = abs(mag - expect) / expect
+            typo = f", {off:.0%} off {expect:g}: a typo?" if off > 0.02 else ""
+            notes.append(f"units {name} (from gravity's magnitude {mag:g}{typo}); masses read as "
                          f"{'kg' if UNIT_SYSTEMS[name][1] == 1 else 'g'} (--units mm-g-s if the scene uses grams)")
             return name
     scene.fail(f"cannot tell the units from gravity's magnitude {mag:g} (9.81: m, 9810: mm); give --units")
@@ -242,6 +248,10 @@ def translate(path: str | Path, units: str | None = None, out_dir: str | Path | 
     sc = _Scene(record(path), path)
     sc.out_dir = Path(out_dir) if out_dir is not None else Path.cwd()
     sc.tr = tr = Translation({}, units="")
+    stubbed = sc.root.__dict__.get("stubbed") or []
+    if stubbed:
+        tr.notes.append(f"run as stubs (unknown to the SOFA stand-in; what they build is not translated): "
+                        f"{', '.join(stubbed)}")
     tr.units = _units(sc, units, tr.notes)
     sc.length, M = UNIT_SYSTEMS[tr.units]
     sc.mass, sc.force, sc.stress = M, M * sc.length, M / sc.length  # kg, N, Pa per scene unit
@@ -297,9 +307,47 @@ def _body_mesh(sc: _Scene) -> None:
         if "translation" in t:
             t["translation"] = [x * L for x in t["translation"]]
         mesh["transform"] = t
+    sc.X = _apply(transform, pts) if transform else pts
+    placed = _state_placement(sc)
+    if placed:
+        if transform:
+            # the loader's placement, then the MechanicalObject's: one transform of the problem format is one
+            # placement, so the mesh file's points are written already placed by the first
+            sc.fail(f"{loader.path()} and the MechanicalObject of {sc.body.path()} both place the body: "
+                    f"combine them in one of the two")
+        sc.X = _apply(placed, pts)
+        t = dict(placed)
+        if "translation" in t:
+            t["translation"] = [x * L for x in t["translation"]]
+        mesh["transform"] = t
+        tr.notes.append(f"the body's MechanicalObject places its mesh ({', '.join(sorted(placed))}): applied")
     tr.problem["mesh"] = mesh
     tr.comments["mesh"] = f"{loader.type} '{loader.name}' ({tr.units.split('-')[0]} -> m)"
-    sc.X = _apply(transform, pts) if transform else pts
+
+
+def _state_placement(sc: _Scene) -> dict:
+    """The body MechanicalObject's own placement of the positions it takes from the topology (SOFA's
+    ``rx, ry, rz`` / ``rotation`` in degrees, ``dx, dy, dz`` / ``translation``, ``scale3d``), as a transform."""
+    mo = next((o for o in sc.body.objects if o.type == "MechanicalObject"), None)
+    if mo is None:
+        return {}
+    d = mo.data
+    t = {}
+    rot = [_num(d.get(k), 0.0) for k in ("rx", "ry", "rz")]
+    if d.get("rotation") is not None:
+        rot = _flat_points(d["rotation"])[0].tolist()
+    if any(rot):
+        t["rotation"] = rot
+    tr = [_num(d.get(k), 0.0) for k in ("dx", "dy", "dz")]
+    if d.get("translation") is not None:
+        tr = _flat_points(d["translation"])[0].tolist()
+    if any(tr):
+        t["translation"] = tr
+    if d.get("scale3d") is not None:
+        s = _flat_points(d["scale3d"])[0]
+        if np.any(s != 1.0):
+            t["scale"] = float(s[0]) if np.all(s == s[0]) else s.tolist()
+    return t
 
 
 def _material(sc: _Scene) -> None:
@@ -370,6 +418,10 @@ def _fixed(sc: _Scene) -> None:
                 sc.fail(f"{o.type} '{o.name}' holds every node (no points): nothing would move")
             sc.fail(f"{o.type} '{o.name}': cannot resolve its {key} {sel!r}")
         entry = {"indices": [k for k in idx if k < len(sc.in_tets) and sc.in_tets[k]]}  # SOFA holds unused points too
+        if not entry["indices"]:
+            sc.fail(f"{o.type} '{o.name}' at {node.path() or '/'}: {how or 'its selection'} holds no point of the "
+                    f"body (the body spans {np.round(sc.X.min(0), 3).tolist()} to {np.round(sc.X.max(0), 3).tolist()} "
+                    f"in scene units)")
         dirs = o.data.get("fixedDirections")
         if o.type.startswith("PartialFixed") and dirs is not None:
             comps = [c for c, d in zip("xyz", _ints(dirs)) if d]
@@ -420,7 +472,16 @@ def _mean_edge(corners: np.ndarray) -> float:
 def _actuators(sc: _Scene) -> None:
     tr, cables, cavities = sc.tr, [], []
     sc.open_strokes = []
-    for node in sc.nodes:
+    # the actuators of the translated body are in its subtree; another body's (a gripper's other fingers)
+    # are listed, not translated (an actuator outside every body's subtree is the body's)
+    own = [n for n in sc.body.walk()]
+    others = [n for n in sc.nodes if n not in own and _objects(n, _CABLES + _CAVITIES)]
+    elsewhere = [n for n in others if any(_objects(a, _FEM) for a in [n, *_ancestors(n)])]
+    for n in elsewhere:
+        for o in _objects(n, _CABLES + _CAVITIES):
+            sc.used.add(id(o))
+            tr.notes.append(f"{o.type} '{o.name}' at {n.path()} acts on another body: not translated")
+    for node in [n for n in sc.nodes if n not in elsewhere]:
         for o in _objects(node, _CABLES):
             sc.used.add(id(o))
             cables.append(_cable(sc, node, o, sc.body, sc.X, sc.length, sc.force, tr.notes, tr, len(cables), sc.used,
@@ -589,6 +650,7 @@ def _layers(scene, body, fem, material, stress, used, notes) -> list[dict]:
 
 
 def _far_axis(X: np.ndarray, fixed_idx: np.ndarray) -> str:
+    fixed_idx = np.asarray(fixed_idx, dtype=np.int64)
     d = X.mean(0) - X[fixed_idx].mean(0)
     c = int(np.argmax(np.abs(d)))
     return ("+" if d[c] >= 0 else "-") + "xyz"[c]
@@ -611,6 +673,7 @@ def _selection(scene: _Scene, body: Node, sel, X: np.ndarray, used: set):
     used.add(id(obj))
     if obj.type == "BoxROI":
         flat = _flat_points(obj.data.get("box", [])).reshape(-1, 6)
+        flat = np.hstack([np.minimum(flat[:, :3], flat[:, 3:]), np.maximum(flat[:, :3], flat[:, 3:])])  # as SOFA
         mask = np.zeros(len(X), bool)
         for b in flat:
             mask |= np.all((X >= b[:3]) & (X <= b[3:]), axis=1)
