@@ -5,7 +5,7 @@
 Every ``.py`` file under the folder that defines ``createScene`` is imported from its own folder (a fresh
 process each, as a user would run the command); a *robot scene* is one whose text builds a deformable body
 (``TetrahedronFEMForceField``, ``TetrahedronHyperelasticityFEMForceField``, ``ElasticMaterialObject``, or
-SoftRobots' ``Finger``/``Bunny`` parts) and an actuator (``CableConstraint``, ``CableActuator``,
+SoftRobots' ``Finger``/``Bunny`` parts), itself or in a module beside it that it imports, and an actuator (``CableConstraint``, ``CableActuator``,
 ``SurfacePressureConstraint``, ``SurfacePressureActuator``, ``PullingCable``, ``PneumaticCavity``). Each problem
 imported is solved at half its input bounds (``admissible_equilibrium``): converged and admissible, or why
 not. A scene whose mesh the copy lacks is counted apart. Rows go to benchmarks/sofa_corpus.json; the table to
@@ -49,8 +49,21 @@ def scenes(folder: Path) -> list[Path]:
     return sorted(p for p in folder.rglob("*.py") if "def createScene" in p.read_text(errors="replace"))
 
 
-def run(scene: Path, out: Path, solve: bool) -> dict:
+IMPORT = re.compile(r"^\s*(?:from|import)\s+([A-Za-z_]\w*)", re.M)
+
+
+def scene_text(scene: Path) -> str:
+    """The scene's text and that of the modules beside it that it imports (a gripper's ``finger.py``)."""
     text = scene.read_text(errors="replace")
+    for name in set(IMPORT.findall(text)):
+        mod = scene.parent / f"{name}.py"
+        if mod.is_file() and mod != scene:
+            text += mod.read_text(errors="replace")
+    return text
+
+
+def run(scene: Path, out: Path, solve: bool) -> dict:
+    text = scene_text(scene)
     row = {"robot": bool(BODY.search(text) and ACTUATOR.search(text))}
     r = subprocess.run([sys.executable, "-m", "casadi_ws.cli", "import-sofa", scene.name, "--out", str(out)],
                        cwd=scene.parent, capture_output=True, text=True, timeout=300)
