@@ -345,10 +345,11 @@ def test_format_bad_sofa_style_keys_are_one_line(tmp_path, keys, message):
     assert message in str(exc.value) and "\n" not in str(exc.value)
 
 
-@pytest.mark.parametrize("value_type", ["pressure", "volumeGrowth"])
+@pytest.mark.parametrize("value_type", ["pressure", "volumeGrowth", "unbounded"])
 def test_a_pressure_cavity_scene_with_an_effector(tmp_path, value_type):
     """SurfacePressureConstraint on a surface loader whose vertices are not mesh nodes (embedded, as SOFA
-    maps it), in pressure or volume growth, and a PositionEffector a hair off the mesh (snapped)."""
+    maps it), in pressure or volume growth (without a bound: half the rest volume, in a note), and a
+    PositionEffector a hair off the mesh (snapped)."""
     from casadi_ws.io.cavities import cavity_enclosing
 
     mesh = load_mesh(REPO / "tests" / "meshes" / "hollow_sphere_4mm.vtu")  # metres: written back in mm
@@ -357,7 +358,8 @@ def test_a_pressure_cavity_scene_with_an_effector(tmp_path, value_type):
     meshio.write(tmp_path / "cavity.stl", meshio.Mesh(wall.points * 1e3 * 0.998, [("triangle", wall.triangles)]),
                  binary=True)
     top = mesh.nodes[:, 2].max() * 1e3
-    bounds = "maxPressure=2, minPressure=0" if value_type == "pressure" else "maxVolumeGrowth=300"
+    bounds = {"pressure": "maxPressure=2, minPressure=0", "volumeGrowth": "maxVolumeGrowth=300",
+              "unbounded": "minVolumeGrowth=0"}[value_type]
     body = f"""\
     body.addObject('MeshVTKLoader', name='loader', filename='ball.vtu')
     body.addObject('MechanicalObject')
@@ -368,7 +370,7 @@ def test_a_pressure_cavity_scene_with_an_effector(tmp_path, value_type):
     cav.addObject('MeshSTLLoader', name='surf', filename='cavity.stl')
     cav.addObject('MeshTopology', src='@surf')
     cav.addObject('MechanicalObject')
-    cav.addObject('SurfacePressureConstraint', valueType='{value_type}', {bounds})
+    cav.addObject('SurfacePressureConstraint', valueType='{value_type.replace("unbounded", "volumeGrowth")}', {bounds})
     cav.addObject('BarycentricMapping')
     eff = body.addChild('effector')
     eff.addObject('MechanicalObject', position=[0, 0, {top + 0.05}])
@@ -382,8 +384,11 @@ def test_a_pressure_cavity_scene_with_an_effector(tmp_path, value_type):
     assert np.allclose(p.end_effector, [0, 0, top * 1e-3], atol=1e-9)  # moved onto the top of the ball
     if value_type == "pressure":
         assert cav.control == "pressure" and cav.u_max == pytest.approx(2000.0)  # 2 kPa in mm-kg-s
-    else:
+    elif value_type == "volumeGrowth":
         assert cav.control == "volume" and cav.u_max == pytest.approx(300e-9)  # 300 mm^3
+    else:
+        assert cav.control == "volume" and cav.u_max == pytest.approx(0.5 * cav.rest_volume(), rel=1e-3)
+        assert any("no maxVolumeGrowth in the scene: u_max set to half its rest volume" in n for n in tr.notes)
     model = StaticModel(p)
     eq = solve_equilibrium(model, 0.5 * model.u_max)
     assert eq.converged and model.intensities(eq.q, eq.u)[0] > 0

@@ -752,7 +752,7 @@ def _cavity(scene, node, o, L, stress, notes, tr, i, out_dir, used) -> dict:
         scene.fail(f"{o.type} '{o.name}': its node {node.path()} has no surface loader (MeshSTLLoader, ...)")
     ld = loaders[0]
     used.add(id(ld))
-    _, file, t, _ = _loader_points(scene, ld, L)
+    pts, file, t, raw = _loader_points(scene, ld, L)
     entry: dict = {"name": node.name if name == o.type else name,
                    "surface": os.path.relpath(file.resolve(), Path(out_dir).resolve()), "scale": L}
     if t:
@@ -765,7 +765,10 @@ def _cavity(scene, node, o, L, stress, notes, tr, i, out_dir, used) -> dict:
         entry["control"] = "volume"
         lo, hi = _num(o.data.get("minVolumeGrowth"), 0.0), _num(o.data.get("maxVolumeGrowth"))
         if hi is None:
-            scene.fail(f"{o.type} '{o.name}': valueType volumeGrowth needs maxVolumeGrowth (the input's bound)")
+            # SOFA leaves the growth unbounded; a workspace needs a box: half the chamber's rest volume, said
+            hi = 0.5 * _rest_volume(scene, o, pts, raw)
+            notes.append(f"cavity {entry['name']}: no maxVolumeGrowth in the scene: u_max set to half its rest "
+                         f"volume ({hi * L**3 * 1e9:.4g} mm^3), edit it")
         entry["u_min"], entry["u_max"] = lo * L**3, hi * L**3
     else:
         lo, hi = _num(o.data.get("minPressure"), 0.0), _num(o.data.get("maxPressure"))
@@ -775,6 +778,16 @@ def _cavity(scene, node, o, L, stress, notes, tr, i, out_dir, used) -> dict:
         entry["u_min"], entry["u_max"] = lo * stress, hi * stress
     tr.comments[f"cavities[{i}]"] = f"{o.type} '{o.name}' at {node.path()}, surface {ld.type} '{ld.name}'"
     return entry
+
+
+def _rest_volume(scene: _Scene, o: Object, pts: np.ndarray, raw) -> float:
+    """The volume a cavity's surface encloses (scene units cubed), whichever way its triangles turn."""
+    from ...actuation.cavity import surface_volume
+
+    tris = [np.asarray(c.data) for c in raw.cells if c.type in ("triangle", "triangle6")]
+    if not tris:
+        scene.fail(f"{o.type} '{o.name}': its surface has no triangles")
+    return abs(float(sum(surface_volume(pts, t) for t in tris)))
 
 
 def _leftovers(scene: _Scene, used: set) -> list[str]:
