@@ -201,6 +201,24 @@ class _Guard:
         return float(np.max(np.linalg.norm(d.reshape(-1, 3), axis=1) / self.size))
 
 
+def _taken_anyway(alpha: float, alpha0: float, rel_try: float, rel: float, fresh_contact: bool) -> bool:
+    """Whether :func:`_newton` takes a step the monotonicity test objects to (the caller has checked that it
+    stays within the trust region)."""
+    if alpha == alpha0 < 1.0:
+        # a step cut where a contact point reaches its surface: taken as it is; the Newton step beyond it,
+        # which the test judges, crosses the contact's switch and means little
+        return True
+    if rel_try < 1e-2 * rel:
+        # in soft, cable-loaded bodies the correction can stall in a soft mode while the residual, which is
+        # what verification reads, falls 100-1000x
+        return True
+    if fresh_contact:
+        # a contact point grazing its surface (gap and force both ~0) makes the smoothed complementarity row
+        # all curvature: the increments stop contracting while the residual falls
+        return bool(rel_try < (1.0 - alpha / 4.0) * rel)
+    return False
+
+
 def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target: float | None = None) -> _Newton:
     """Newton on the free dofs with Deuflhard's natural-monotonicity test, kept on its branch.
 
@@ -284,19 +302,7 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
             theta = np.linalg.norm(dq_bar) / size if dq_bar is not None else np.inf
             ok = bool(theta < 1.0 - alpha / 4.0)
             if not ok and np.isfinite(theta) and guard.reach(alpha * dq) <= TRUST_REGION:
-                # steps the test objects to, taken within the trust region only
-                if alpha == alpha0 < 1.0:
-                    # a step cut where a contact point reaches its surface: taken as it is; the Newton step
-                    # beyond it, which the test judges, crosses the contact's switch and means little
-                    ok = True
-                elif rel_try < 1e-2 * rel:
-                    # in soft, cable-loaded bodies the correction can stall in a soft mode while the residual,
-                    # which is what verification reads, falls 100-1000x
-                    ok = True
-                elif fresh and contact:
-                    # a contact point grazing its surface (gap and force both ~0) makes the smoothed
-                    # complementarity row all curvature: the increments stop contracting while the residual falls
-                    ok = bool(rel_try < (1.0 - alpha / 4.0) * rel)
+                ok = _taken_anyway(alpha, alpha0, rel_try, rel, fresh and contact)
             ok = ok and not crushes
             if rel < tol and not (ok and rel_try < rel and alpha * size > 1e-13 * np.linalg.norm(q)):
                 # polishing towards ``target`` has reached round-off (the residual of trunk_table at rest
