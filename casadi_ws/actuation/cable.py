@@ -35,6 +35,11 @@ class Cable(Actuator):
     """Mesh node of each passage point (k,), if the points were given as node indices (SOFA's
     ``indices``): they then move exactly with those nodes."""
 
+    spread: float | None = None
+    """Distance (m) over which each passage point's force is spread on the body's boundary nodes, weights
+    falling linearly to zero at it (SOFA's CableConstraint ``centers``/``radii``, methods sphere and geodesic);
+    None: the point is embedded in its host element."""
+
     control: str = "force"
     """``force``: u is the tension (N); ``displacement``: u is the shortening L0 - L (m) the motor imposes,
     the tension an unknown >= 0 (a slack cable carries none), like SOFA's CableConstraint."""
@@ -72,7 +77,7 @@ class Cable(Actuator):
         return (-np.inf if self.stroke_max is None else rest - self.stroke_max), np.inf, "stroke"
 
     def describe(self) -> dict:
-        return {**super().describe(), "stroke_max": self.stroke_max,
+        return {**super().describe(), "stroke_max": self.stroke_max, "spread": self.spread,
                 "nodes": None if self.nodes is None else np.asarray(self.nodes).tolist(),
                 "pull_point": None if self.pull_point is None else np.asarray(self.pull_point, float).tolist()}
 

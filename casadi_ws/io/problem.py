@@ -96,7 +96,8 @@ _CONSTANTS = {"c10", "c01", "c20", "c30", "mu", "alpha"}
 _MATERIAL = {"name", "model", "young_modulus", "poisson_ratio", "density", "total_mass", "max_stretch",
              "bulk_modulus", "d1", "formulation", *_CONSTANTS}
 _REGION = (_MATERIAL - {"total_mass"}) | {"box"}
-_CABLE = {"name", "points", "indices", "pull_point", "trunk_routing", "u_min", "u_max", "stroke_max", "control"}
+_CABLE = {"name", "points", "indices", "pull_point", "trunk_routing", "u_min", "u_max", "stroke_max", "control",
+          "spread"}
 _CAVITY = {"name", "surface", "enclosing", "u_min", "u_max", "scale", "transform", "volume_max", "volume_max_ratio",
            "embed_tolerance", "control"}
 _ADMISSIBILITY = {"stability", "inversion", "self_penetration", "min_det_F", "penetration_depth",
@@ -492,6 +493,16 @@ def _read_cables(r: _Reader, lst, mesh: Mesh) -> list[Cable]:
             r.fail(f"{key}.points[{j}]", f"point {np.round(cable.points[j], 6).tolist()} lies "
                    f"{emb.outside[j]:.4g} m outside the mesh (allowed: {MAX_OUTSIDE_RELATIVE * size:.3g} m)")
         cable.stroke_max = r.optional(c, "stroke_max", key, lo=0.0, lo_open=True)
+        cable.spread = r.optional(c, "spread", key, lo=0.0, lo_open=True)
+        if cable.spread is not None:
+            from ..fem.contact import boundary_nodes
+
+            b = mesh.nodes[boundary_nodes(mesh)]
+            gap = [float(np.linalg.norm(b - p, axis=1).min()) for p in cable.points]
+            if max(gap) >= cable.spread:
+                j = int(np.argmax(gap))
+                r.fail(f"{key}.spread", f"no boundary node of the body within {cable.spread:g} m of point {j} "
+                                        f"(the nearest is {gap[j]:.3g} m away)")
         cable.control = control
         cables.append(cable)
     return cables

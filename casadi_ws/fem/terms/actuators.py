@@ -99,6 +99,8 @@ class Actuators(Term):
         """W (3k x n_dof): the actuator's points from the nodal positions; points that are mesh nodes
         (``actuator.nodes``) follow them exactly, others are embedded in their host elements."""
         nodes = getattr(actuator, "nodes", None)
+        if getattr(actuator, "spread", None):
+            return spread_matrix(model, actuator.rest_points(), actuator.spread)
         if nodes is None:
             return model.embedding(np.asarray(actuator.rest_points(), dtype=float))
         cols = (3 * np.asarray(nodes, dtype=np.int64)[:, None] + np.arange(3)).ravel()
@@ -241,3 +243,25 @@ class Actuators(Term):
             hc.append(P.col)
         cat = lambda parts: np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)  # noqa: E731
         return cat(hr), cat(hc)
+
+
+def spread_matrix(model, points: np.ndarray, radius: float) -> sp.csr_matrix:
+    """W (3k x n_dof) of points each standing for the weighted mean of the body's boundary nodes within
+    ``radius`` of it, weights (radius - distance) normalised: a force on the point is spread over that patch
+    as SOFA's cable ``radii`` spread it (its geodesic distance taken as the straight one)."""
+    from ..contact import boundary_nodes
+
+    b = boundary_nodes(model.mesh)
+    rows, cols, vals = [], [], []
+    for i, p in enumerate(np.asarray(points, dtype=float)):
+        d = np.linalg.norm(model.mesh.nodes[b] - p, axis=1)
+        near = d < radius
+        if not near.any():
+            raise ValueError(f"no boundary node of the body within {radius:g} m of the point {p.tolist()}")
+        w = (radius - d[near]) / (radius - d[near]).sum()
+        for c in range(3):
+            rows.append(np.full(near.sum(), 3 * i + c))
+            cols.append(3 * b[near] + c)
+            vals.append(w)
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(3 * len(points), model.n_dof))
