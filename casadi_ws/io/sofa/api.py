@@ -151,6 +151,12 @@ class Node:
         self.objects.append(obj)
         return obj
 
+    def removeObject(self, obj):  # noqa: N802
+        self.objects[:] = [o for o in self.objects if o is not obj]
+
+    def removeChild(self, child):  # noqa: N802
+        self.children[:] = [c for c in self.children if c is not child]
+
     def addData(self, name, value=None, *args, **kwargs):  # noqa: N802
         self.data[name] = kwargs.get("value", value)
 

@@ -7,6 +7,7 @@ it. Only the helpers listed in ``docs/sofa.md`` exist; a scene importing another
 from __future__ import annotations
 
 import types
+from pathlib import Path
 
 from .api import Node
 
@@ -95,6 +96,73 @@ def CollisionMesh(attachedTo=None, surfaceMeshFileName=None, name="collision", *
     return node
 
 
+def RigidObject(name="RigidObject", surfaceMeshFileName=None, translation=(0.0, 0.0, 0.0),  # noqa: N802
+                rotation=(0.0, 0.0, 0.0), uniformScale=1.0, totalMass=1.0, volume=1.0,
+                inertiaMatrix=(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0), color=(1.0, 1.0, 1.0, 1.0),
+                collisionGroup="", isAStaticObject=False, parent=None, shape=None):
+    """stlib3.physics.rigid.RigidObject: a Rigid3 state placed by ``translation``/``rotation``, a mass, an
+    integrator unless ``isAStaticObject``, a collision child (the surface mesh, scaled by ``uniformScale``) and a
+    visual one. ``shape`` (Cube, Sphere, Floor) says what SOFA's own mesh file is, which is not shipped here."""
+    node = Node(name)
+    if parent is not None:
+        parent.addChild(node)
+    node.addObject("MechanicalObject", name="mstate", template="Rigid3", translation2=list(translation),
+                   rotation2=list(rotation), showObjectScale=uniformScale)
+    node.addObject("UniformMass", name="mass", vertexMass=[totalMass, volume, list(inertiaMatrix)])
+    if not isAStaticObject:
+        node.addObject("EulerImplicitSolver")
+        node.addObject("CGLinearSolver", iterations=25, tolerance=1e-5, threshold=1e-5)
+    node.__dict__["rigid"] = {"static": bool(isAStaticObject), "shape": shape, "scale": float(uniformScale),
+                              "translation": list(translation), "rotation": list(rotation)}
+    if surfaceMeshFileName is not None:
+        col = node.addChild("collision")
+        col.addObject("MeshOBJLoader", name="loader", filename=surfaceMeshFileName, triangulate=True,
+                      scale=uniformScale)
+        col.addObject("MeshTopology", src="@loader")
+        col.addObject("MechanicalObject")
+        for kind in ("TriangleCollisionModel", "LineCollisionModel", "PointCollisionModel"):
+            col.addObject(kind, group=collisionGroup, **({"moving": False, "simulated": False} if isAStaticObject else {}))
+        col.addObject("RigidMapping")
+        node.addChild(VisualModel(name="visual", visualMeshPath=surfaceMeshFileName, color=list(color),
+                                  scale=[uniformScale] * 3))
+        node.visual.addObject("RigidMapping")
+    return node
+
+
+def _rigid(shape, mesh):
+    def make(node, **kwargs):
+        kwargs.setdefault("name", shape.capitalize())
+        return RigidObject(parent=node, surfaceMeshFileName=mesh, shape=shape, **kwargs)
+    make.__name__ = shape.capitalize()
+    make.__doc__ = f"stlib3.physics.rigid.{make.__name__}: a RigidObject on SOFA's {mesh}."
+    return make
+
+
+Cube, Sphere, Floor = _rigid("cube", "mesh/cube.obj"), _rigid("sphere", "mesh/ball.obj"), _rigid("floor", "mesh/floor.obj")
+
+
+def Rigidify(targetObject, sourceObject, groupIndices, frames=None, name=None):  # noqa: N802, N803
+    """stlib3.physics.mixedmaterial.Rigidify: groups of the body's points made rigid. The stand-in builds the
+    nodes the scene goes on to use (``RigidParts``, ``DeformableParts``) and marks the body with its groups,
+    which the translation lists (the groups stay elastic in casadi-ws)."""
+    node = targetObject.addChild(name or sourceObject.name)
+    node.__dict__["rigidify_of"] = sourceObject
+    free = node.addChild("DeformableParts")
+    free.addObject("MechanicalObject", template="Vec3", name="dofs")
+    rigid = node.addChild("RigidParts")
+    rigid.addObject("MechanicalObject", template="Rigid3", name="dofs", position=[list(f) for f in frames or []])
+    points = rigid.addChild("RigidifiedParticules")
+    points.addObject("MechanicalObject", template="Vec3", name="dofs")
+    points.addObject("RigidMapping", name="mapping", globalToLocalCoords=True)
+    for kind in ("solver", "integration", "correction"):
+        obj = sourceObject.getObject(kind)
+        if obj is not None:
+            sourceObject.removeObject(obj)
+    sourceObject.addObject("SubsetMultiMapping", name="mapping", template="Vec3,Vec3")
+    sourceObject.__dict__["rigidified"] = [list(map(int, g)) for g in groupIndices]
+    return node
+
+
 def FixedBox(applyTo=None, atPositions=(-1.0, -1.0, -1.0, 1.0, 1.0, 1.0), name="FixedBox", doVisualization=False,  # noqa: N802
              position=None, constraintStrength=1e12, doRecomputeDuringSimulation=False):
     """stlib3.physics.constraints.FixedBox: a child node with a BoxROI and stiff RestShapeSprings."""
@@ -143,7 +211,12 @@ def _scene(root, gravity=(0.0, -9.81, 0.0), dt=0.01, plugins=(), repositoryPaths
     root.addObject("VisualStyle", name="VisualStyle")
 
     def child(name):  # STLIB's Scene keeps one of each (a scene may ask twice)
-        return root.getChild(name) or root.addChild(name)
+        node = root.getChild(name)
+        if node is None:
+            node = root.addChild(name)
+            if name == "Settings":  # the mouse's spring, which tutorials tune (Settings.mouseButton.stiffness)
+                node.addObject("AttachBodyButtonSetting", name="mouseButton", stiffness=10)
+        return node
 
     def add_solver(node):
         node.addObject("EulerImplicitSolver", name="TimeIntegrationSchema")
@@ -174,6 +247,10 @@ def ContactHeader(applyTo, alarmDistance=None, contactDistance=None, frictionCoe
     return applyTo
 
 
+VENDOR = Path(__file__).resolve().parent / "vendor"
+"""SoftRobots' robot parts (``softrobots.parts.finger``, ``.bunny``), copied unchanged under their licence."""
+
+
 def stand_in_modules(base: dict) -> dict:
     """The stlib3 and softrobots modules (and ``Sofa.Prefab``), added to the recorder's stand-ins."""
     base["Sofa"].Prefab = Prefab
@@ -187,13 +264,20 @@ def stand_in_modules(base: dict) -> dict:
     deformable = module("stlib3.physics.deformable", ElasticMaterialObject=ElasticMaterialObject)
     constraints = module("stlib3.physics.constraints", FixedBox=FixedBox)
     collision = module("stlib3.physics.collision", CollisionMesh=CollisionMesh)
-    physics = module("stlib3.physics", deformable=deformable, constraints=constraints, collision=collision)
+    rigid = module("stlib3.physics.rigid", RigidObject=RigidObject, Cube=Cube, Sphere=Sphere, Floor=Floor)
+    mixed = module("stlib3.physics.mixedmaterial", Rigidify=Rigidify)
+    physics = module("stlib3.physics", deformable=deformable, constraints=constraints, collision=collision,
+                     rigid=rigid, mixedmaterial=mixed)
     scene = module("stlib3.scene", Scene=_scene, MainHeader=_scene, ContactHeader=ContactHeader)
     visuals = module("stlib3.visuals", VisualModel=VisualModel)
     stlib3 = module("stlib3", physics=physics, scene=scene, visuals=visuals)
     actuators = module("softrobots.actuators", PullingCable=PullingCable, PneumaticCavity=PneumaticCavity)
-    softrobots = module("softrobots", actuators=actuators)
-    return {"stlib3": stlib3, "stlib3.physics": physics, "stlib3.physics.deformable": deformable,
-            "stlib3.physics.constraints": constraints, "stlib3.physics.collision": collision,
+    # SoftRobots' own parts (vendor/NOTICE.md): a package whose submodules the import system finds in the
+    # vendored folder and runs against these stand-ins
+    parts = module("softrobots.parts", __path__=[str(VENDOR / "softrobots" / "parts")])
+    softrobots = module("softrobots", actuators=actuators, parts=parts)
+    return {"softrobots.parts": parts, "stlib3": stlib3, "stlib3.physics": physics, "stlib3.physics.deformable": deformable,
+            "stlib3.physics.constraints": constraints, "stlib3.physics.collision": collision, "stlib3.physics.rigid": rigid,
+            "stlib3.physics.mixedmaterial": mixed,
             "stlib3.scene": scene, "stlib3.visuals": visuals, "softrobots": softrobots,
             "softrobots.actuators": actuators}

@@ -20,6 +20,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from .api import Data, Node, Object, SceneError, stand_in_modules, stub_missing, stubbed_module
+from .prefabs import VENDOR
 from .prefabs import stand_in_modules as prefab_modules
 
 __all__ = ["Data", "Node", "Object", "SceneError", "record"]
@@ -64,10 +65,11 @@ def _installed(modules: dict, scene_dir: Path, used: set):
                 sys.modules.pop(k, None)
             else:
                 sys.modules[k] = v
-        # the scene's own helper modules (FingerController) must not leak into the next recording
+        # the scene's own helper modules (FingerController) and the vendored parts run against this
+        # recording's stand-ins: they must not leak into the next recording
         for k in set(sys.modules) - before:
-            mod = sys.modules.get(k)
-            if getattr(mod, "__file__", None) and Path(mod.__file__).resolve().parent == scene_dir.resolve():
+            file = getattr(sys.modules.get(k), "__file__", None)
+            if file and (Path(file).resolve().parent == scene_dir.resolve() or VENDOR in Path(file).resolve().parents):
                 sys.modules.pop(k, None)
 
 
