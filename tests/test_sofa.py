@@ -561,3 +561,158 @@ def test_stlib_scene_header_children_and_a_second_robot(tmp_path):
     tr = translate(_scene(tmp_path, textwrap.dedent(head) + two), out_dir=tmp_path)
     assert len(tr.problem["cables"]) == 1
     assert any("at /body2/cable acts on another body: not translated" in n for n in tr.notes)
+
+
+# ------------------------------------------------------------------ any SOFA robot: rules of issue "SOFA corpus"
+def test_softrobots_parts_run_from_the_vendored_copy_and_leave_nothing_behind(tmp_path):
+    """``softrobots.parts.finger.Finger`` is SoftRobots' own code (casadi_ws/io/sofa/vendor), run against the
+    stand-ins: four fingers, the first translated with its cable, the others one line each."""
+    scene = tmp_path / "parts.py"
+    scene.write_text(textwrap.dedent("""\
+        from softrobots.parts.finger import Finger
+        def createScene(root):
+            root.gravity = [0, -981, 0]
+            for i, name in enumerate(("A", "B")):
+                Finger(root, name=name, translation=[0, 0, 50 * i], valueType='position')
+        """))
+    tr = translate(scene, out_dir=tmp_path)
+    p = _load(tr, tmp_path)
+    assert tr.units == "cm-kg-s" and len(p.cables) == 1 and p.mesh.n_nodes == 158  # the Finger's finger.vtk
+    assert any(line.startswith("another deformable body at /B (") for line in tr.untranslated)
+    assert not any("/B/" in line for line in tr.untranslated)  # the other body is one line, not one per part
+    assert not any(k.startswith("softrobots.parts") for k in sys.modules)
+
+
+def test_units_come_from_the_body_when_gravity_is_unset_or_zero(tmp_path):
+    """A 40-unit block with E = 500: 40 mm across and 500 kPa (mm-kg-s) is nearer a soft robot's 10 cm than
+    40 cm is; 40 m fits no unit system of a soft robot. Unset, SOFA's default gravity is in scene units."""
+    _box_file(tmp_path)
+    body = _BODY.format(transform="")
+    unset = _scene(tmp_path, body, gravity="None").read_text().replace("    root.gravity = None\n", "")
+    (tmp_path / "unset.py").write_text(unset)
+    tr = translate(tmp_path / "unset.py", out_dir=tmp_path)
+    assert tr.units == "mm-kg-s" and np.allclose(tr.problem["gravity"], [0, -0.00981, 0])
+    assert any(n.startswith("gravity is not set: units mm-kg-s taken from the body (a body 0.04 m across, "
+                            "E = 5e+05 Pa; also fits: cm-kg-s") for n in tr.notes)
+    tr = translate(_scene(tmp_path, body, gravity="[0, 0, 0]"), out_dir=tmp_path)
+    assert tr.units == "mm-kg-s" and tr.problem["gravity"] == [0, 0, 0]
+    huge = body.replace("youngModulus=500", "youngModulus=5e12")
+    with pytest.raises(SceneError, match=r"gravity is zero, and the body's extent 40 .* fits no unit system"):
+        translate(_scene(tmp_path, huge, gravity="[0, 0, 0]"), out_dir=tmp_path)
+
+
+_RIGIDS = """\
+from stlib3.physics.rigid import Floor, Cube
+Floor(root, name='Floor', translation=[0, 0, -5], rotation=[90, 0, 0], isAStaticObject=True)
+Cube(root, name='Cube', translation=[30, 0, 20], uniformScale=5)
+wall = root.addChild('Wall')
+wall.addObject('MeshOBJLoader', name='loader', filename='wall.obj', translation=[20, 0, 0])
+wall.addObject('MeshTopology', src='@loader')
+wall.addObject('MechanicalObject')
+wall.addObject('TriangleCollisionModel')
+"""
+
+
+def test_fixed_rigid_objects_become_obstacles_and_free_ones_are_listed(tmp_path):
+    """stlib3's Floor (isAStaticObject) -> a plane, a flat collision surface nothing integrates -> a plane with
+    its normal towards the body, a Cube with a solver -> a note; a floor that cuts the body -> a note."""
+    _box_file(tmp_path)
+    (tmp_path / "wall.obj").write_text("v 0 -50 -50\nv 0 50 -50\nv 0 50 50\nv 0 -50 50\nf 1 2 3\nf 1 3 4\n")
+    tr = translate(_scene(tmp_path, _BODY.format(transform=""), _RIGIDS), out_dir=tmp_path)
+    floor, wall = tr.problem["obstacles"]
+    # Floor: +y turned 90 deg about x is +z, through (0, 0, -5) mm; the wall x = 20 mm faces the body (-x)
+    assert floor == {"name": "Floor", "plane": {"point": [0, 0, -0.005], "normal": [0.0, 0.0, 1.0]}}
+    assert wall["name"] == "Wall" and np.allclose(wall["plane"]["normal"], [-1, 0, 0])
+    assert np.allclose(wall["plane"]["point"][0], 0.02)
+    assert any(n.startswith("rigid object /Cube moves") for n in tr.notes)
+    assert not any("Floor" in line or "Cube" in line or "Wall" in line for line in tr.untranslated)
+    p = _load(tr, tmp_path)
+    assert [o.kind for o in p.obstacles] == ["plane", "plane"]
+    cut = _RIGIDS.replace("translation=[0, 0, -5]", "translation=[0, 0, 20]")
+    tr = translate(_scene(tmp_path, _BODY.format(transform=""), cut), out_dir=tmp_path)
+    assert [o["name"] for o in tr.problem["obstacles"]] == ["Wall"]
+    assert "fixed object /Floor: its plane cuts the body at rest; not translated as an obstacle" in tr.notes
+
+
+def test_a_cable_with_centers_spreads_its_force_over_the_surface_patch(tmp_path):
+    """SOFA's CableConstraint ``centers``/``radii``/``method='sphere'`` -> a cable point with ``spread``: the
+    force on the nodes sums to the tension along the cable (a closed form: nothing else acts) and falls on
+    the boundary nodes within the radius, weighted (r - d)."""
+    from casadi_ws.fem.contact import boundary_nodes
+
+    _, m = _box_file(tmp_path)
+    body = _BODY.format(transform="").replace(
+        "cable.addObject('MechanicalObject', position=[[4, 0, 5], [4, 0, 20], [4, 0, 35]])\n", "").replace(
+        "indices=[0, 1, 2], pullPoint=[4, 0, 0]", "centers=[[0, 5, 40]], radii=[6], method='sphere', "
+        "pullPoint=[0, 30, 40]")
+    tr = translate(_scene(tmp_path, body), out_dir=tmp_path)
+    (c,) = tr.problem["cables"]
+    assert c["points"] == [[0.0, 0.005, 0.04]] and c["spread"] == 0.006
+    model = StaticModel(_load(tr, tmp_path))
+    f = np.zeros(model.n_dof)  # 2 N of tension, at rest, on the free dofs (the support takes the rest)
+    f[model.free] = model.actuation_matrix(np.zeros(model.n_dof)).T @ np.array([2.0])
+    F = f.reshape(-1, 3)
+    x = model.mesh.nodes
+    b = boundary_nodes(model.mesh)
+    d = np.linalg.norm(x[b] - [0, 0.005, 0.04], axis=1)
+    near = b[d < 0.006]
+    assert set(np.flatnonzero(np.abs(F).sum(1) > 1e-12)) == set(near)
+    w = (0.006 - d[d < 0.006]) / (0.006 - d[d < 0.006]).sum()
+    xbar = w @ x[near]
+    direction = (np.array([0, 0.03, 0.04]) - xbar) / np.linalg.norm([0, 0.03, 0.04] - xbar)
+    assert np.allclose(F.sum(0), 2.0 * direction, atol=1e-12)
+    assert np.allclose(F[near], w[:, None] * 2.0 * direction, atol=1e-12)
+    far = body.replace("centers=[[0, 5, 40]], radii=[6]", "centers=[[0, 5, 37.5]], radii=[1]")  # nodes 2.5 mm off
+    with pytest.raises(SceneError, match=r"cables\[0\].spread: no boundary node of the body within 0.001 m of "
+                                         r"point 0 \(the nearest is 0.0025 m away\)"):
+        translate(_scene(tmp_path, far), out_dir=tmp_path)
+
+
+def test_rigidify_effector_goals_and_topology_changes_are_said(tmp_path):
+    _box_file(tmp_path)
+    extra = """\
+    from stlib3.physics.mixedmaterial import Rigidify
+    Rigidify(root, body, groupIndices=[[0, 1, 2], [3, 4]])
+    eff = body.addChild('effector')
+    eff.addObject('MechanicalObject', position=[[0, 0, 40]])
+    eff.addObject('PositionEffector', indices=[0], effectorGoal=[10, 0, 40])
+    eff.addObject('BarycentricMapping')
+    body.addObject('TetrahedronSetTopologyModifier')
+    """
+    tr = translate(_scene(tmp_path, _BODY.format(transform=""), extra), out_dir=tmp_path)
+    assert "stlib3 Rigidify makes 5 points of /body rigid in 2 group(s): not modelled, those parts stay elastic " \
+           "here" in tr.notes
+    assert any(n.startswith("PositionEffector 'PositionEffector' at /body/effector/PositionEffector: its "
+                            "effectorGoal") for n in tr.notes)
+    assert any(line.startswith("TetrahedronSetTopologyModifier: changes the topology during a simulation")
+               for line in tr.untranslated)
+    assert tr.problem["end_effector"]["point"] == [0.0, 0.0, 0.04]
+
+
+def test_a_cavity_a_little_outside_the_body_is_embedded_as_sofa_maps_it(tmp_path):
+    """A surface up to 5 % of the body's size outside it is embedded (SOFA's barycentric mapping extrapolates),
+    with its embed_tolerance written and a note; further out it is refused as before."""
+    _, m = _box_file(tmp_path, size=(20.0, 20.0, 40.0), div=(4, 4, 8))
+    cube = box_mesh((8.0, 8.0, 8.0), (1, 1, 1), (-4.0, -4.0, 16.0))
+    from casadi_ws.fem.surface import boundary_faces
+
+    faces = boundary_faces(cube)
+    for name, grow in (("near.stl", 1.0), ("far.stl", 4.0)):
+        pts = cube.nodes.copy()
+        pts[pts[:, 0] > 0, 0] += 6.0 + grow  # the +x face pushed past the body's side at x = 10 mm
+        meshio.write(tmp_path / name, meshio.Mesh(pts, [("triangle", faces)]), binary=True)
+    cavity = """\
+    cav = body.addChild('cavity')
+    cav.addObject('MeshSTLLoader', name='loader', filename='{}')
+    cav.addObject('MeshTopology', src='@loader')
+    cav.addObject('MechanicalObject')
+    cav.addObject('SurfacePressureConstraint', maxPressure=10)
+    cav.addObject('BarycentricMapping')
+    """
+    tr = translate(_scene(tmp_path, _BODY.format(transform=""), cavity.format("near.stl")), out_dir=tmp_path)
+    (c,) = tr.problem["cavities"]
+    assert c["embed_tolerance"] == pytest.approx(1.05e-3, rel=1e-3)  # 1 mm out, 5 % more
+    assert any("surface vertices lie up to 1 mm outside the body" in n for n in tr.notes)
+    _load(tr, tmp_path)
+    with pytest.raises(SceneError, match=r"cavities\[0\].surface: vertex .* lies 0.004 m from the mesh"):
+        translate(_scene(tmp_path, _BODY.format(transform=""), cavity.format("far.stl")), out_dir=tmp_path)

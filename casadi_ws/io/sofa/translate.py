@@ -57,15 +57,18 @@ _FIXED = ("FixedConstraint", "FixedProjectiveConstraint", "RestShapeSpringsForce
 _MASSES = ("UniformMass", "MeshMatrixMass", "DiagonalMass")
 # components whose content is translated through another (a topology read by the body, a mapping that
 # embeds a cable's points, a selection a constraint links to)
-_ABSORBED = ("MechanicalObject", "MeshTopology", "TetrahedronSetTopologyContainer", "TetrahedronSetTopologyModifier",
+_ABSORBED = ("MechanicalObject", "MeshTopology", "TetrahedronSetTopologyContainer",
              "TetrahedronSetGeometryAlgorithms", "TriangleSetTopologyContainer", "BarycentricMapping", "BoxROI",
              "SphereROI", "PositionEffector", "RequiredPlugin") + _LOADERS
 _KINDS = (
     ("dynamics or solver (casadi-ws solves the static equilibrium itself)",
      ("Solver", "AnimationLoop", "ConstraintCorrection", "ODESolver")),
     ("visual only", ("Ogl", "Visual", "Light", "Camera", "BackgroundSetting", "SceneFrame")),
+    ("changes the topology during a simulation (the mesh is kept as loaded)", ("TopologyModifier",
+                                                                               "TopologicalMapping")),
     ("collision and contact (not modelled yet)", ("Collision", "Contact", "Pipeline", "Intersection",
-                                                  "BroadPhase", "NarrowPhase", "BruteForce")),
+                                                  "BroadPhase", "NarrowPhase", "BruteForce", "MinDistance",
+                                                  "Proximity")),
 )
 
 
@@ -225,10 +228,9 @@ def _units(scene: _Scene, units: str | None, notes: list) -> str:
         if units not in UNIT_SYSTEMS:
             scene.fail(f"--units: expected one of {', '.join(UNIT_SYSTEMS)}, got {units!r}")
         return units
-    if g is None:
-        notes.append("gravity is not set: SOFA's default (0, -9.81, 0) and units m-kg-s assumed (--units to change)")
-        return "m-kg-s"
-    mag = float(np.linalg.norm(_flat_points(g)[0]))
+    mag = float(np.linalg.norm(_flat_points(g)[0])) if g is not None else None
+    if not mag:  # gravity unset (SOFA's default -9.81 in whatever units) or zero: it says nothing
+        return _units_from_body(scene, notes, "gravity is not set" if g is None else "gravity is zero")
     for name, expect in (("m-kg-s", 9.81), ("mm-kg-s", 9810.0), ("cm-kg-s", 981.0)):
         if abs(mag - expect) <= UNITS_TOLERANCE * expect:
             off = abs(mag - expect) / expect
@@ -237,6 +239,42 @@ def _units(scene: _Scene, units: str | None, notes: list) -> str:
                          f"{'kg' if UNIT_SYSTEMS[name][1] == 1 else 'g'} (--units mm-g-s if the scene uses grams)")
             return name
     scene.fail(f"cannot tell the units from gravity's magnitude {mag:g} (9.81: m, 9810: mm); give --units")
+
+
+PLAUSIBLE_SIZE = (0.005, 2.0)
+"""Body sizes (m) and Young's moduli (Pa, below) a soft robot has: with gravity unset or zero, the unit systems
+that make the body's extent and modulus fall in both are candidates, and the one whose size is nearest 10 cm
+is taken (SoftRobots' Bunny: 10 units, E 18000 -> cm-kg-s, 10 cm and 1.8 MPa)."""
+PLAUSIBLE_MODULUS = (1e3, 1e8)
+
+
+def _units_from_body(scene: _Scene, notes: list, why: str) -> str:
+    bodies = [n for n in scene.nodes if _objects(n, _FEM) and not any(_objects(a, _FEM) for a in _ancestors(n))]
+    loaders = [o for o in (bodies[0].objects if bodies else []) if o.type in _LOADERS and o.data.get("filename")]
+    if not loaders:  # nothing to go on; what is missing is said next
+        notes.append(f"{why}: units m-kg-s assumed (--units to change)")
+        return "m-kg-s"
+    pts = _loader_points(scene, loaders[0], 1.0)[0]
+    extent = float(np.ptp(pts, axis=0).max()) * float(np.max(_transform(loaders[0]).get("scale", 1.0)))
+    fem = _objects(bodies[0], _FEM)[0]
+    E = _num(fem.data.get("youngModulus"), None) if fem.type != "TetrahedronHyperelasticityFEMForceField" else None
+    fits = []
+    for name in ("m-kg-s", "cm-kg-s", "mm-kg-s"):
+        L, M = UNIT_SYSTEMS[name]
+        size, modulus = extent * L, None if E is None else E * M / L
+        if PLAUSIBLE_SIZE[0] <= size <= PLAUSIBLE_SIZE[1] and (
+                modulus is None or PLAUSIBLE_MODULUS[0] <= modulus <= PLAUSIBLE_MODULUS[1]):
+            fits.append((abs(np.log(size / 0.1)), name, size, modulus))
+    if not fits:
+        scene.fail(f"{why}, and the body's extent {extent:g} (youngModulus {E}) fits no unit system of a soft "
+                   f"robot ({PLAUSIBLE_SIZE[0]:g}-{PLAUSIBLE_SIZE[1]:g} m, {PLAUSIBLE_MODULUS[0]:g}-"
+                   f"{PLAUSIBLE_MODULUS[1]:g} Pa); give --units")
+    _, name, size, modulus = min(fits)
+    said = f"a body {size:.3g} m across" + (f", E = {modulus:.3g} Pa" if modulus is not None else "")
+    notes.append(f"{why}: units {name} taken from the body ({said}; "
+                 f"{'also fits: ' + ', '.join(f[1] for f in sorted(fits)[1:]) + '; ' if len(fits) > 1 else ''}"
+                 f"--units to change)")
+    return name
 
 
 def translate(path: str | Path, units: str | None = None, out_dir: str | Path | None = None) -> Translation:
@@ -261,10 +299,12 @@ def translate(path: str | Path, units: str | None = None, out_dir: str | Path | 
     _body_mesh(sc)
     _material(sc)
     g = sc.root.data.get("gravity")
-    tr.problem["gravity"] = (_flat_points(g)[0] * sc.length if g is not None else np.array([0, -9.81, 0])).tolist()
+    # unset, SOFA's default (0, -9.81, 0) is in the scene's units, as SOFA runs it
+    tr.problem["gravity"] = ((_flat_points(g)[0] if g is not None else np.array([0, -9.81, 0])) * sc.length).tolist()
     _fixed(sc)
     _actuators(sc)
     _loads(sc)
+    _obstacles(sc)
     _effector(sc)
     tr.untranslated = _leftovers(sc, sc.used)
     _open_strokes(sc)
@@ -286,7 +326,12 @@ def _body_mesh(sc: _Scene) -> None:
     if not bodies:
         sc.fail("no node holds a TetrahedronFEMForceField (or TetrahedronHyperelasticityFEMForceField): no "
                 "deformable body to translate")
-    sc.body = bodies[0]
+    sc.body, sc.others = bodies[0], bodies[1:]
+    groups = sc.body.__dict__.get("rigidified")
+    if groups:
+        tr.notes.append(f"stlib3 Rigidify makes {sum(map(len, groups))} points of {sc.body.path()} rigid in "
+                        f"{len(groups)} group(s): not modelled, those parts stay elastic here")
+        sc.used.update(id(o) for o in sc.body.objects if o.type == "SubsetMultiMapping")
     if len(bodies) > 1:
         tr.notes.append(f"{len(bodies)} deformable bodies; translated the first, {sc.body.path()} (the others: "
                         f"{', '.join(b.path() for b in bodies[1:])})")
@@ -581,10 +626,132 @@ def _surface_pressure(sc: _Scene, node: Node, o: Object) -> dict | None:
             "pressure": float(f"{(-p if same[0] else p):.6g}")}
 
 
+_ODE = ("EulerImplicitSolver", "EulerExplicitSolver", "RungeKutta4Solver", "RungeKutta2Solver", "StaticSolver",
+        "NewmarkImplicitSolver", "CentralDifferenceSolver", "BDFOdeSolver", "VariationalSymplecticSolver",
+        "NewtonRaphsonSolver")
+_COLLISION_MODELS = ("TriangleCollisionModel", "LineCollisionModel", "PointCollisionModel", "SphereCollisionModel")
+
+
+def _obstacles(sc: _Scene) -> None:
+    """Rigid objects and collision surfaces outside the deformable bodies: a fixed one (stlib3's
+    ``isAStaticObject``, a ``FixedConstraint``, collision models with ``moving``/``simulated`` off, or nothing
+    integrating it) becomes an obstacle the body may touch but not enter (frictionless); one that moves (a
+    cube to grasp) is listed, one line each."""
+    bodies = {id(b) for b in [sc.body, *sc.others]}
+    out = []
+    for n in sc.nodes:
+        if any(id(a) in bodies or "rigidify_of" in a.__dict__ for a in [n, *_ancestors(n)]) or any(
+                id(a) in sc.__dict__.get("_obstacle_ids", ()) for a in _ancestors(n)):
+            continue
+        rigid = [o for o in _objects(n, ("MechanicalObject",)) if str(o.data.get("template", "")).startswith("Rigid")]
+        models = [o for c in [n, *n.children] for o in _objects(c, _COLLISION_MODELS)]
+        if not rigid and not (models and _objects(n, _LOADERS) and not any("Mapping" in o.type for o in n.objects)):
+            continue
+        sc.__dict__.setdefault("_obstacle_ids", set()).add(id(n))
+        info = n.__dict__.get("rigid") or {}
+        off = models and all(not _bool(o.data.get("simulated"), True) or not _bool(o.data.get("moving"), True)
+                             for o in models)
+        integrated = any(_objects(a, _ODE) for a in [n, *_ancestors(n)])
+        static = info.get("static") or _objects(n, _FIXED) or off or not integrated
+        if not static:
+            sc.tr.notes.append(f"rigid object {n.path()} moves (something integrates it): a free object is not "
+                               f"modelled, not translated")
+            _absorb(sc, n)
+            continue
+        why, shape = _obstacle_shape(sc, n, info)
+        if shape is None:
+            sc.tr.notes.append(f"fixed object {n.path()}: {why}; not translated as an obstacle")
+        else:
+            shape = {"name": n.name, **shape}
+            ok = _obstacle_clear(sc, shape)
+            if ok is True:
+                out.append(shape)
+                sc.tr.notes.append(f"fixed object {n.path()} -> obstacle {n.name!r} ({why}; frictionless contact)")
+            else:
+                sc.tr.notes.append(f"fixed object {n.path()}: {ok}; not translated as an obstacle")
+        _absorb(sc, n)
+    if out:
+        sc.tr.problem["obstacles"] = out
+        sc.tr.comments["obstacles"] = "fixed rigid objects and collision surfaces of the scene"
+
+
+def _absorb(sc: _Scene, node: Node) -> None:
+    for m in node.walk():
+        for o in m.objects:
+            sc.used.add(id(o))
+
+
+def _obstacle_shape(sc: _Scene, n: Node, info: dict) -> tuple[str, dict | None]:
+    """The obstacle (SI) a fixed object makes: stlib3's Floor a plane, its Cube a box, its Sphere a sphere (SOFA's
+    own meshes, ``mesh/floor.obj`` ..., are not needed); otherwise a flat collision mesh a plane."""
+    from ...fem.mesh import transform_points
+
+    L = sc.length
+    kind = info.get("shape")
+    t, r, s = (np.asarray(info.get(k, d), float) for k, d in (("translation", [0, 0, 0]),
+                                                              ("rotation", [0, 0, 0]), ("scale", 1.0)))
+    if kind == "floor":
+        normal = np.round(transform_points(np.array([[0.0, 1.0, 0.0]]), r)[0], 12) + 0.0
+        return "stlib3 Floor: a plane", {"plane": {"point": (t * L).tolist(), "normal": normal.tolist()}}
+    if kind in ("cube", "sphere") and np.any(r):
+        return f"a rotated stlib3 {kind.capitalize()}", None
+    if kind == "cube":  # SOFA's mesh/cube.obj spans [-1, 1]^3
+        return "stlib3 Cube: a box", {"box": [((t - s) * L).tolist(), ((t + s) * L).tolist()]}
+    if kind == "sphere":
+        return "stlib3 Sphere: a sphere", {"sphere": {"center": (t * L).tolist(), "radius": float(s * L)}}
+    loaders = [o for c in [n, *n.children] for o in _objects(c, _LOADERS) if o.data.get("filename")]
+    if not loaders:
+        return "no mesh loader gives its shape", None
+    f = Path(str(loaders[0].data["filename"]))
+    if not (f if f.is_absolute() else sc.dir / f).is_file():
+        return f"its mesh {f} is not found", None
+    pts = _loader_points(sc, loaders[0], L)[0]
+    tf = _transform(loaders[0])
+    x = (_apply(tf, pts) if tf else pts) * L
+    c = x.mean(axis=0)
+    _, sv, vt = np.linalg.svd(x - c, full_matrices=False)
+    if sv[-1] > 1e-6 * sv[0]:
+        return "its collision mesh is not flat (only flat ones become obstacles, as planes)", None
+    return f"a flat collision mesh ({loaders[0].type} '{loaders[0].name}'): a plane", {
+        "plane": {"point": c.tolist(), "normal": (np.round(vt[-1], 12) + 0.0).tolist()}}
+
+
+def _obstacle_clear(sc: _Scene, shape: dict):
+    """True when the body at rest lies clear of the obstacle (a plane's normal turned towards the body), else
+    why not."""
+    from ...fem.contact import Obstacle, boundary_nodes
+    from ...fem.mesh import Mesh
+
+    if sc.tets is None:
+        return "the body has no tetrahedra to check it against"
+    mesh = Mesh(sc.X * sc.length, sc.tets, str(sc.path))
+    x = mesh.nodes[boundary_nodes(mesh)]
+    if "plane" in shape:
+        p, nrm = np.asarray(shape["plane"]["point"]), np.asarray(shape["plane"]["normal"], float)
+        side = (x - p) @ nrm
+        if side.min() < 0 < side.max():
+            return "its plane cuts the body at rest"
+        if side.max() <= 0:
+            shape["plane"]["normal"] = (-nrm).tolist()
+        return True
+    kind = next(iter(k for k in shape if k != "name"))
+    params = ({"lower": np.asarray(shape["box"][0]), "upper": np.asarray(shape["box"][1])} if kind == "box" else
+              {"center": np.asarray(shape["sphere"]["center"]), "radius": shape["sphere"]["radius"]})
+    d = Obstacle(kind, "", params).distance(x)
+    return True if d.min() > 0 else "it holds or overlaps the body at rest"
+
+
 def _effector(sc: _Scene) -> None:
     """The first PositionEffector's point, else the centre of the body's end farthest from its support."""
     tr, X = sc.tr, sc.X
     eff = [(n, o) for n in sc.nodes for o in _objects(n, ("PositionEffector",))]
+    for n, o in eff:
+        goal = o.data.get("effectorGoal")
+        if goal is not None:  # a link to a goal node, or coordinates
+            tr.notes.append(f"PositionEffector '{o.name}' at {o.path()}: its effectorGoal (SOFA's inverse target) is "
+                            f"not translated; casadi-ws reach --target X,Y,Z (m) solves for one")
+    for n, o in eff[1:]:
+        tr.notes.append(f"PositionEffector '{o.name}' at {o.path()}: only the first effector is the end effector")
     if eff:
         n, o = eff[0]
         mo = _objects(n, ("MechanicalObject",))
@@ -695,7 +862,23 @@ def _cable(scene, node, o, body, X, L, force, notes, tr, i, used, disp) -> dict:
     entry: dict = {"name": str(name)}
     comment = [f"{o.type} '{o.name}' at {node.path()}"]
     idx = _ints(o.data["indices"]) if o.data.get("indices") is not None else None
-    if node is body:
+    centers = o.data.get("centers")
+    if centers is not None:
+        # SOFA attaches the cable at the surface vertex closest to each centre and, with method sphere or
+        # geodesic, spreads its force over the vertices within the centre's radius
+        entry["points"] = [[float(f"{x * L:.9g}") for x in p] for p in _flat_points(centers)]
+        method = str(o.data.get("method", "point"))
+        if method in ("sphere", "geodesic"):
+            radii = _floats(o.data.get("radii", [1.0]))
+            entry["spread"] = float(f"{radii.max() * L:.9g}")
+            notes.append(f"cable {name}: its force spread over the body's surface within {radii.max() * L * 1e3:.3g} "
+                         f"mm of each centre (method {method}"
+                         f"{': the straight distance stands for the geodesic one' if method == 'geodesic' else ''}"
+                         f"{'; the largest of its radii' if radii.size > 1 and np.ptp(radii) > 0 else ''})")
+        comment.append(f"centers ({method})")
+        for m in _objects(node, ("MechanicalObject",)) + _objects(node, _LOADERS):
+            used.add(id(m))
+    elif node is body:
         if idx is None:
             scene.fail(f"{o.type} '{o.name}' on the body has no indices")
         entry["indices"] = idx
@@ -759,6 +942,7 @@ def _cavity(scene, node, o, L, stress, notes, tr, i, out_dir, used) -> dict:
         if "translation" in t:
             t["translation"] = [x * L for x in t["translation"]]
         entry["transform"] = t
+    _embed_tolerance(scene, entry, _apply(t, pts) if t else pts, L, notes)
     value_type = str(o.data.get("valueType", "pressure"))
     if value_type == "volumeGrowth":
         # the input is the chamber's volume growth (scene length units cubed), the pressure an unknown
@@ -780,6 +964,25 @@ def _cavity(scene, node, o, L, stress, notes, tr, i, out_dir, used) -> dict:
     return entry
 
 
+EMBED_SLACK = 0.05
+"""A cavity surface up to this share of the body's size (its bounding-box diagonal) outside it is embedded as
+SOFA's barycentric mapping does (extrapolated); the problem format's default allows 1 %."""
+
+
+def _embed_tolerance(scene: _Scene, entry: dict, pts: np.ndarray, L: float, notes: list) -> None:
+    from ...fem.mesh import Mesh, embed
+
+    if scene.tets is None:
+        return
+    mesh = Mesh(scene.X, scene.tets, str(scene.path))
+    h, out = mesh.characteristic_length(), embed(mesh, pts).outside
+    if 0.01 * h < out.max() <= EMBED_SLACK * h:
+        entry["embed_tolerance"] = float(f"{1.05 * out.max() * L:.3g}")
+        notes.append(f"cavity {entry['name']}: {int((out > 0.01 * h).sum())} surface vertices lie up to "
+                     f"{out.max() * L * 1e3:.3g} mm outside the body; embedded as SOFA's barycentric mapping does "
+                     f"(embed_tolerance {entry['embed_tolerance']:g} m)")
+
+
 def _rest_volume(scene: _Scene, o: Object, pts: np.ndarray, raw) -> float:
     """The volume a cavity's surface encloses (scene units cubed), whichever way its triangles turn."""
     from ...actuation.cavity import surface_volume
@@ -793,8 +996,14 @@ def _rest_volume(scene: _Scene, o: Object, pts: np.ndarray, raw) -> float:
 def _leftovers(scene: _Scene, used: set) -> list[str]:
     """One line per component type that was not translated."""
     groups: dict[str, list[str]] = {}
+    others = {id(b): b for b in getattr(scene, "others", [])}
+    bodies: dict[str, list[str]] = {}  # another body: one line, its component types
     for n in scene.nodes:
+        other = next((a for a in [n, *_ancestors(n)] if id(a) in others), None)
         for o in n.objects:
+            if other is not None:
+                bodies.setdefault(other.path(), []).append(o.type)
+                continue
             if id(o) in used or o.type in _ABSORBED:
                 continue
             if o.type == "Controller":
@@ -803,7 +1012,9 @@ def _leftovers(scene: _Scene, used: set) -> list[str]:
                 label = next((f"{o.type}: {why}" for why, words in _KINDS if any(w in o.type for w in words)),
                              f"{o.type}: unknown to the importer")
             groups.setdefault(label, []).append(o.path())
-    return [f"{label} at {', '.join(paths)}" for label, paths in groups.items()]
+    return [f"{label} at {', '.join(paths)}" for label, paths in groups.items()] + [
+        f"another deformable body at {path} ({len(kinds)} components: {', '.join(sorted(set(kinds)))})"
+        for path, kinds in bodies.items()]
 
 
 def _yaml(v) -> str:
