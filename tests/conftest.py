@@ -21,6 +21,16 @@ SOFA_TRUNK = REPO / "problems" / "meshes" / "trunk.vtk"
 MESHES = REPO / "tests" / "meshes"
 
 
+def script(name: str):
+    """A script of scripts/ imported as a module (its functions are what tests check)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, REPO / "scripts" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
 def cantilever(n=2, slender=10, model="linear", nu=0.3, E=1e6, L=0.2, cable_offset=None, loads=(), order=1):
     """A square beam along +z clamped at z = 0, n elements across, cubic elements (order 2: 10-node
     tetrahedra)."""

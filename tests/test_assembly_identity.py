@@ -9,14 +9,9 @@ from casadi_ws import StaticModel
 
 
 def _identity_script():
-    import importlib.util
+    from conftest import script
 
-    from conftest import REPO
-
-    spec = importlib.util.spec_from_file_location("assembler_identity", REPO / "scripts" / "assembler_identity.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return script("assembler_identity")
 
 
 @pytest.mark.slow
