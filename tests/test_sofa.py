@@ -602,9 +602,11 @@ def test_units_come_from_the_body_when_gravity_is_unset_or_zero(tmp_path):
 
 
 _RIGIDS = """\
-from stlib3.physics.rigid import Floor, Cube
+from stlib3.physics.rigid import Floor, Cube, Sphere
 Floor(root, name='Floor', translation=[0, 0, -5], rotation=[90, 0, 0], isAStaticObject=True)
 Cube(root, name='Cube', translation=[30, 0, 20], uniformScale=5)
+Cube(root, name='Block', translation=[0, 20, 20], uniformScale=3, isAStaticObject=True)
+Sphere(root, name='Ball', translation=[0, -20, 20], uniformScale=3, isAStaticObject=True)
 wall = root.addChild('Wall')
 wall.addObject('MeshOBJLoader', name='loader', filename='wall.obj', translation=[20, 0, 0])
 wall.addObject('MeshTopology', src='@loader')
@@ -619,7 +621,10 @@ def test_fixed_rigid_objects_become_obstacles_and_free_ones_are_listed(tmp_path)
     _box_file(tmp_path)
     (tmp_path / "wall.obj").write_text("v 0 -50 -50\nv 0 50 -50\nv 0 50 50\nv 0 -50 50\nf 1 2 3\nf 1 3 4\n")
     tr = translate(_scene(tmp_path, _BODY.format(transform=""), _RIGIDS), out_dir=tmp_path)
-    floor, wall = tr.problem["obstacles"]
+    floor, block, ball, wall = tr.problem["obstacles"]
+    # SOFA's mesh/cube.obj spans [-1, 1]^3 and mesh/ball.obj is the unit sphere, times uniformScale
+    assert block == {"name": "Block", "box": [[-0.003, 0.017, 0.017], [0.003, 0.023, 0.023]]}
+    assert ball == {"name": "Ball", "sphere": {"center": [0.0, -0.02, 0.02], "radius": 0.003}}
     # Floor: +y turned 90 deg about x is +z, through (0, 0, -5) mm; the wall x = 20 mm faces the body (-x)
     assert floor == {"name": "Floor", "plane": {"point": [0, 0, -0.005], "normal": [0.0, 0.0, 1.0]}}
     assert wall["name"] == "Wall" and np.allclose(wall["plane"]["normal"], [-1, 0, 0])
@@ -627,10 +632,10 @@ def test_fixed_rigid_objects_become_obstacles_and_free_ones_are_listed(tmp_path)
     assert any(n.startswith("rigid object /Cube moves") for n in tr.notes)
     assert not any("Floor" in line or "Cube" in line or "Wall" in line for line in tr.untranslated)
     p = _load(tr, tmp_path)
-    assert [o.kind for o in p.obstacles] == ["plane", "plane"]
+    assert [o.kind for o in p.obstacles] == ["plane", "box", "sphere", "plane"]
     cut = _RIGIDS.replace("translation=[0, 0, -5]", "translation=[0, 0, 20]")
     tr = translate(_scene(tmp_path, _BODY.format(transform=""), cut), out_dir=tmp_path)
-    assert [o["name"] for o in tr.problem["obstacles"]] == ["Wall"]
+    assert [o["name"] for o in tr.problem["obstacles"]] == ["Block", "Ball", "Wall"]
     assert "fixed object /Floor: its plane cuts the body at rest; not translated as an obstacle" in tr.notes
 
 

@@ -481,8 +481,13 @@ def _fixed(sc: _Scene) -> None:
                             f"times a boundary node's) translated as fixed nodes")
         fixed.append((entry, f"{o.type} '{o.name}': {how}"))
     if not fixed and not springs:
+        bodies = {id(b) for b in [sc.body, *sc.others]}
+        touches = [n.path() for n in sc.nodes if _objects(n, _COLLISION_MODELS) and not any(
+            id(a) in bodies for a in [n, *_ancestors(n)])]
+        hint = (f" (it only rests on {', '.join(touches[:2])} by contact: a robot held by contact alone, one that "
+                f"rolls or walks, is not modelled)" if touches else "")
         sc.fail(f"no FixedConstraint, RestShapeSpringsForceField or PartialFixedConstraint on {sc.body.path()}: the "
-                f"body is not held")
+                f"body is not held{hint}")
     if fixed:
         tr.problem["fixed"] = [e for e, _ in fixed]
         for i, (_, c) in enumerate(fixed):
