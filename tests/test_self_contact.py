@@ -79,8 +79,8 @@ def test_stacked_cantilevers_share_the_load_as_beam_theory_says(tmp_path):
     eq_free = solve_equilibrium(free, np.zeros(1))
     y = free.positions(eq_free.q)
     assert y[_node(free, [L, 0, T + GAP])][2] < y[_node(free, [L, 0, T])][2] - 0.5 * GAP  # passes through
-    # the admissibility check does not look at regions this close at rest (admissible.NEAR_AT_REST element
-    # sizes): there self_contact is what holds them apart
+    # the audit compares regions however close at rest: the beams passing through each other are refused
+    assert "self_penetration" in admissibility(free, eq_free.q, np.zeros(1), eq_free.factorization).violations
 
 
 def test_equilibrium_json_reports_the_self_contact(tmp_path, capsys):

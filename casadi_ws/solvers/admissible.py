@@ -14,7 +14,8 @@ unstable            the tangent K on the free dofs is not positive definite: for
 inverted            det F at some quadrature point is below ``min_det_F`` (default 0.1)
 self_penetration    a boundary sample of the deformed body (a boundary node, mid-edge nodes of
                     10-node meshes included, or a boundary face's centroid) lies inside a tetrahedron
-                    that does not touch it, deeper than ``penetration_depth`` in barycentric terms
+                    that does not touch it, deeper than ``penetration_depth`` in barycentric terms,
+                    whatever their distance at rest
 stroke              a cable shortened by more than its ``stroke_max``
 volume              a cavity's volume exceeds its ``volume_max``
 stretch             a principal stretch exceeds the material's ``max_stretch``
@@ -245,28 +246,30 @@ def smallest_eigenvalues(model, q, u, K=None, k: int = 6):
 
 def penetrating_samples(model, q: np.ndarray, depth: float = 0.01) -> np.ndarray:
     """Indices of the boundary samples (see :func:`_samples`) lying inside a tetrahedron that does not
-    touch them, in the deformed configuration q.
+    touch them, in the deformed configuration q, whatever their distance at rest.
 
-    Candidates are the samples within each tetrahedron's circumscribing ball about its centroid (KD-trees,
-    one per class of tetrahedra of similar size, so a graded mesh's large elements do not widen the search
-    of its small ones); the test is on barycentric coordinates in the straight tetrahedron of the corners.
+    First the deformed boundary is asked whether it passes through itself at all (an edge crossing a
+    triangle it shares no vertex with: :func:`casadi_ws.fem.collision.surface_crosses`, ~1 ms). A sample
+    inside a tetrahedron away from it takes the surface near it inside the body, so where the surface does
+    not cross itself no sample can be inside (all elements positively oriented: an inverted one is the
+    ``inverted`` check's). Else every sample is tested: candidates are the samples within each
+    tetrahedron's circumscribing ball about its centroid (KD-trees, one per class of tetrahedra of similar
+    size, so a graded mesh's large elements do not widen the search of its small ones); the test is on
+    barycentric coordinates in the straight tetrahedron of the corners.
     """
     from scipy.spatial import cKDTree
 
-    S = _samples(model)
+    from ..fem.collision import surface_crosses
+
     x = model.positions(q)
-    # first with a bound of the radii below, 3/4 of the longest edge: on the trunk it settles most calls in
-    # ~0.1 ms, where the radii take ~0.3 ms
-    d = x[S.edges[:, 0]] - x[S.edges[:, 1]]
-    if not _clusters_meet(S, x, 1.5 * (1 + 1e-9) * float(np.sqrt(np.einsum("ij,ij->i", d, d).max()))):
+    if not surface_crosses(model, x):
         return np.zeros(0, dtype=np.int64)
+    S = _samples(model)
     tets = model.mesh.tets
     c0, c1, c2, c3 = (x[tets[:, a]] for a in range(4))  # curved 10-node elements judged by their corners
     centre = 0.25 * (c0 + c1 + c2 + c3)
     radius = np.sqrt(np.max([np.einsum("ij,ij->i", c - centre, c - centre) for c in (c0, c1, c2, c3)], axis=0))
     radius *= 1 + 1e-9
-    if not _clusters_meet(S, x, 2.0 * float(radius.max())):
-        return np.zeros(0, dtype=np.int64)
     corners = np.stack([c0, c1, c2, c3], axis=1)
     pts = S.W @ x
     samples = cKDTree(pts)
@@ -309,34 +312,6 @@ class _Samples:
     """(s, n) sparse: sample positions from the node positions."""
     touching: np.ndarray
     """Sorted keys s * n_tets + e of the (sample, tetrahedron) pairs that touch at rest: not checked."""
-    order: np.ndarray
-    """The nodes sorted by cluster (clusters: cubes of CLUSTER largest-element diameters at rest)."""
-    starts: np.ndarray
-    """Where each cluster starts in ``order``."""
-    far: np.ndarray
-    """(k, 2) pairs of clusters more than NEAR_AT_REST largest-element diameters apart at rest."""
-    edges: np.ndarray
-    """(e, 2) the edges of the tetrahedra's corners, each once."""
-
-
-CLUSTER = 2.0
-NEAR_AT_REST = 3.0
-"""Clusters of nodes closer than this many largest-element diameters at rest are neighbours: their coming
-together is not looked into as self-penetration (see :func:`_clusters_meet`)."""
-
-
-def _clusters_meet(S: _Samples, x: np.ndarray, reach: float) -> bool:
-    """Whether two clusters of nodes that were far apart at rest now come within ``reach`` of each other
-    (their bounding boxes, grown by it, overlap). A sample inside a tetrahedron lies within the
-    tetrahedron's diameter of its corners, so when no such clusters meet, no sample can be inside a
-    tetrahedron of a cluster far from its own: the check is over in ~0.2 ms. Else the full test runs."""
-    if not len(S.far):
-        return False
-    xs = x[S.order]
-    lo = np.minimum.reduceat(xs, S.starts, axis=0) - reach
-    hi = np.maximum.reduceat(xs, S.starts, axis=0)
-    a, b = S.far[:, 0], S.far[:, 1]
-    return bool(np.any(np.all((lo[a] <= hi[b]) & (lo[b] <= hi[a]), axis=1)))
 
 
 def _samples(model) -> _Samples:
@@ -366,23 +341,7 @@ def _build_samples(model) -> _Samples:
         touch = touch @ (node_tets.T @ node_tets)
     touch = touch.tocoo()
     keys = np.unique(touch.row.astype(np.int64) * m + touch.col)
-    corners = mesh.nodes[mesh.tets[:, :4]]
-    diameter = max(float(np.linalg.norm(corners[:, i] - corners[:, j], axis=1).max())
-                   for i in range(4) for j in range(i + 1, 4))
-    X = mesh.nodes
-    cell = np.floor((X - X.min(axis=0)) / (CLUSTER * diameter)).astype(np.int64)
-    _, cluster = np.unique(cell, axis=0, return_inverse=True)
-    cluster = cluster.ravel()
-    order = np.argsort(cluster, kind="stable")
-    starts = np.flatnonzero(np.r_[True, np.diff(cluster[order]) != 0])
-    lo = np.minimum.reduceat(X[order], starts, axis=0)
-    hi = np.maximum.reduceat(X[order], starts, axis=0)
-    i, j = np.triu_indices(len(starts), k=1)
-    gap = np.linalg.norm(np.maximum(0.0, np.maximum(lo[i] - hi[j], lo[j] - hi[i])), axis=1)
-    far = np.column_stack([i, j])[gap > NEAR_AT_REST * diameter]
-    pairs = np.sort(np.stack([mesh.tets[:, [0, 0, 0, 1, 1, 2]], mesh.tets[:, [1, 2, 3, 2, 3, 3]]], axis=2)
-                    .reshape(-1, 2), axis=1)
-    return _Samples(W, keys, order, starts, far, np.unique(pairs, axis=0))
+    return _Samples(W, keys)
 
 
 def stable_branch(model, q: np.ndarray, u: np.ndarray, mode: np.ndarray, tol: float | None = None,
