@@ -15,7 +15,10 @@ import numpy as np
 
 from .base import Actuator
 
-__all__ = ["Cable", "trunk_cable"]
+__all__ = ["Cable", "SHORT", "trunk_cable"]
+
+SHORT = 1e-2
+"""A cable segment shorter than this share of its rest length has its length blended (:meth:`Cable.quantity`)."""
 
 
 @dataclass
@@ -65,12 +68,20 @@ class Cable(Actuator):
         return np.vstack([np.asarray(self.pull_point, dtype=float)[None], pts])
 
     def quantity(self, P: ca.SX) -> ca.SX:
+        """The length; a segment shorter than :data:`SHORT` of its rest length counts as
+        (delta^2 + l^2) / (2 delta) (delta that share): where two passage points on facing walls of a groove
+        meet as the groove closes (the SOFA Trunk's points sit on its disks' faces), the segment's direction
+        would flip and its force with it; the blend keeps the length and its gradient continuous (it differs
+        from l by at most delta / 2 there, and not at all beyond)."""
         pts = [P[3 * i:3 * i + 3] for i in range(P.numel() // 3)]
         if self.pull_point is not None:
             pts = [ca.DM(np.asarray(self.pull_point, dtype=float))] + pts
+        rest = np.linalg.norm(np.diff(self.polyline(), axis=0), axis=1) if len(pts) == len(self.polyline()) \
+            else np.full(len(pts) - 1, np.inf)
         L = 0
-        for a, b in zip(pts[:-1], pts[1:]):
-            L += ca.norm_2(b - a)
+        for a, b, l0 in zip(pts[:-1], pts[1:], rest):
+            length, delta = ca.norm_2(b - a), SHORT * float(l0)
+            L += ca.if_else(length < delta, (delta**2 + length**2) / (2 * delta), length) if delta > 0 else length
         return L
 
     def quantity_limits(self, rest: float) -> tuple[float, float, str]:
