@@ -31,6 +31,24 @@ def script(name: str):
     return mod
 
 
+def nodes_inside_other_tetrahedra(m, q, depth=0.01):
+    """An audit independent of the package's: every boundary node against every tetrahedron (its straight
+    corner tetrahedron) that does not hold it, by barycentric coordinates; no broad phase, no rest distance."""
+    from casadi_ws.fem.surface import boundary_faces
+
+    x = m.positions(q)
+    tets = m.mesh.tets[:, :4]
+    c = x[tets]
+    Tinv = np.linalg.inv(np.stack([c[:, 1] - c[:, 0], c[:, 2] - c[:, 0], c[:, 3] - c[:, 0]], axis=2))
+    inside = []
+    for n in np.unique(boundary_faces(m.mesh)[:, :3]):
+        lam = np.einsum("mij,mj->mi", Tinv, x[n] - c[:, 0])
+        bary = np.column_stack([1.0 - lam.sum(axis=1), lam])
+        if np.any(np.all(bary > depth, axis=1) & ~np.any(m.mesh.tets == n, axis=1)):
+            inside.append(int(n))
+    return inside
+
+
 def cantilever(n=2, slender=10, model="linear", nu=0.3, E=1e6, L=0.2, cable_offset=None, loads=(), order=1):
     """A square beam along +z clamped at z = 0, n elements across, cubic elements (order 2: 10-node
     tetrahedra)."""

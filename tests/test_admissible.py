@@ -4,11 +4,9 @@ References are closed forms (Euler's buckling load, a cable's compliance on a be
 the same tangent, or geometry built in the test; never an earlier output of the code under test.
 """
 
-from pathlib import Path
-
 import numpy as np
 import pytest
-from conftest import cantilever, small_trunk
+from conftest import REPO, cantilever, nodes_inside_other_tetrahedra, small_trunk
 
 import casadi_ws as cw
 from casadi_ws import Cable, Material, Problem, box_mesh
@@ -18,7 +16,6 @@ from casadi_ws.solvers.admissible import (AdmissibilitySettings, admissibility, 
                                           penetrating_samples)
 from casadi_ws.solvers.equilibrium import solve_equilibrium
 
-ROOT = Path(__file__).resolve().parents[1]
 
 E, L, H = 1e6, 0.2, 0.01
 P_EULER = np.pi**2 * E * (H**4 / 12) / (4 * L**2)  # cantilever, dead axial load at the tip
@@ -175,35 +172,17 @@ def test_a_body_passing_through_itself_is_refused_a_gently_bent_one_is_not(order
         assert ("self_penetration" in adm.violations) == penetrates
 
 
-def _nodes_inside_other_tetrahedra(m, q, depth=0.01):
-    """An audit independent of the package's: every boundary node against every tetrahedron (its straight
-    corner tetrahedron) that does not hold it, by barycentric coordinates; no broad phase, no rest distance."""
-    from casadi_ws.fem.surface import boundary_faces
-
-    x = m.positions(q)
-    tets = m.mesh.tets[:, :4]
-    c = x[tets]
-    Tinv = np.linalg.inv(np.stack([c[:, 1] - c[:, 0], c[:, 2] - c[:, 0], c[:, 3] - c[:, 0]], axis=2))
-    inside = []
-    for n in np.unique(boundary_faces(m.mesh)[:, :3]):
-        lam = np.einsum("mij,mj->mi", Tinv, x[n] - c[:, 0])
-        bary = np.column_stack([1.0 - lam.sum(axis=1), lam])
-        if np.any(np.all(bary > depth, axis=1) & ~np.any(m.mesh.tets == n, axis=1)):
-            inside.append(int(n))
-    return inside
-
-
 def test_a_coarse_finger_curled_through_its_own_base_is_refused():
     # SoftRobots' Finger (about ten elements long, shipped in problems/sofa/finger), its cable pulled 55 mm:
     # the curled end passes through the finger near its base, parts a few element sizes apart at rest that
     # the audit once did not compare (issue 69); 50 mm curls it without touching
-    p = cw.load_problem(ROOT / "problems" / "sofa" / "finger" / "finger.yaml")
+    p = cw.load_problem(REPO / "problems" / "sofa" / "finger" / "finger.yaml")
     p.actuators[0].u_max = 0.06
     m = cw.StaticModel(p)
     for u, through in ((0.05, False), (0.055, True)):
         eq = cw.quasi_static(m, [u])
         assert eq.converged
-        inside = _nodes_inside_other_tetrahedra(m, eq.q)
+        inside = nodes_inside_other_tetrahedra(m, eq.q)
         assert (len(inside) >= 5) if through else not inside
         adm = admissibility(m, eq.q, eq.u, eq.factorization)
         assert ("self_penetration" in adm.violations) == through, (u, adm.penetrating, inside)
