@@ -131,6 +131,7 @@ class _ResidualFunctions:
         self.with_load = with_load
         n, nu = m.n_free, m.n_u
         keys = m.pattern_keys()  # sorted column * n + row: K's CSC order
+        self.version = m.pattern_version
         rows, cols = keys % n, keys // n
         self.K = _Pattern((n, n), rows, cols)
         # dR/du_a is nonzero where the terms say: the free dofs that move actuator a's points, or a prescribed
@@ -164,11 +165,23 @@ class _ResidualFunctions:
 
     def tangent(self, q, u, load):
         _, K, dRdu = self.m.residual_and_tangent(self.full(q), u, load)
+        self.current()
         return K, dRdu
+
+    def current(self):
+        """Refuses to go on where the model's pattern grew since these Functions declared it (self-contact
+        found as the body moves, at a state with pairs it had not met): a Jacobian on the old pattern would
+        drop entries."""
+        if self.m.pattern_version != self.version:
+            from .spec import ModelError
+
+            raise ModelError("the model's sparsity pattern grew since this CasADi Function was built (self_contact: "
+                             "auto met new pairs of its boundary): build the Function again at this state")
 
     def hessian_values(self, q, u, lam):
         """Nonzeros of d(K^T lam)/dq on the pattern H, and d(K^T lam)/du (dense)."""
         Hqq, Hqu = self.m.residual_hessian(self.full(q), u, lam)
+        self.current()
         Hqq = Hqq.tocoo()
         vals = np.zeros(self._h_keys.size)
         np.add.at(vals, np.searchsorted(self._h_keys, Hqq.col.astype(np.int64) * self.m.n_free + Hqq.row), Hqq.data)

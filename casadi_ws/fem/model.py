@@ -88,7 +88,7 @@ class StaticModel:
         self._internal = [t for t in self.terms if t.phase == "internal"]
         self._applied = [t for t in self.terms if t.phase == "applied"]
         self._with_rows = [t for t in self.terms if t.phase == "rows"]
-        self.has_contact = any(t.n_rows for t in self.contact_terms())
+        self.has_contact = any(t.n_rows or t.grows for t in self.contact_terms())
         """Whether the model has contact points (the Newton steps' contact safeguards apply)."""
         self.pivot_threshold = 0.0 if any(t.negatives for t in self.terms) else 0.01
         """SuperLU's diag_pivot_thresh for this model's tangents (:func:`casadi_ws.solvers.linear.factorize`): 0
@@ -167,7 +167,12 @@ class StaticModel:
     # ------------------------------------------------------------------ the pattern
     def _build_pattern(self, pos):
         """One sparsity pattern of K on the free dofs, from every term's keys; each term is told its slots."""
-        keys = [t.pattern(self, pos) for t in self.terms]
+        self._pos = pos
+        self._keys = [t.pattern(self, pos) for t in self.terms]
+        self._attach()
+
+    def _attach(self):
+        keys = self._keys
         ukey, slot = np.unique(np.concatenate(keys + [np.zeros(0, dtype=np.int64)]), return_inverse=True)
         self._ukey = ukey
         self.nnz = ukey.size
@@ -180,6 +185,19 @@ class StaticModel:
         for t, k in zip(self.terms, keys):
             t.attach(self, slot[at:at + k.size])
             at += k.size
+
+    pattern_version = 0
+    """How many times the pattern grew (:meth:`grow_pattern`): what was built on an older one is stale."""
+
+    def grow_pattern(self) -> None:
+        """Re-read the keys of the terms whose pattern grows with the state (``Term.grows``: self-contact
+        found as the body moves) and lay the pattern out again; called by such a term from its residual,
+        before any tangent of the state is assembled. Factorisations see a new pattern and analyse it anew."""
+        for i, t in enumerate(self.terms):
+            if t.grows:
+                self._keys[i] = t.pattern(self, self._pos)
+        self._attach()
+        self.pattern_version += 1
 
     def slots(self, keys: np.ndarray) -> np.ndarray:
         """The positions in the pattern's data of entries given by keys (column * n_free + row); a term that
@@ -455,7 +473,8 @@ class StaticModel:
 
     def in_contact(self, q: np.ndarray) -> np.ndarray:
         """(n_con,) bool: the contact points that press at the equilibrium q (lambda > kappa g)."""
-        return np.concatenate([t.in_contact(self, q) for t in self.contact_terms()] + [np.zeros(0, dtype=bool)])
+        return np.concatenate([t.in_contact(self, q) for t in self.contact_terms() if t.n_rows]
+                              + [np.zeros(0, dtype=bool)])
 
     def min_gap(self, q: np.ndarray) -> float:
         """The smallest gap of any contact point at q (m; inf without contact)."""

@@ -166,7 +166,7 @@ def admissible_guess(model, q: np.ndarray) -> bool:
     """Whether a first iterate keeps every element above the admissibility floor of det F (Newton never takes
     an iterate below it, :func:`_newton`; a predictor that does mixes branches)."""
     guard = _Guard(model)
-    return guard.min_det(q) >= guard.floor
+    return guard.min_det(q) >= guard.floor and all(t.admits(model, q) for t in model.terms)
 
 
 class _Guard:
@@ -252,6 +252,8 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
         status = CONVERGED if rel < tol else (DIVERGED if not np.isfinite(rel) else MAX_ITERATIONS)
         return _Newton(q, status, its, its, rel, None)
     free = model.free
+    if not all(t.admits(model, q) for t in model.terms):
+        return _Newton(q.copy(), DIVERGED, 0, 0, np.inf, fac)
     guard = _Guard(model, q)
     contact = getattr(model, "has_contact", False)
     q = q.copy()
@@ -532,6 +534,8 @@ def _continuation(model, q, u_start, load_start, u_end, tol, max_iter, max_steps
         u_t = u_start + t * (u_end - u_start)
         load_t = load_start + t * (1.0 - load_start)
         guess = q if prev is None else q + (q - prev[1]) * (t - s) / (s - prev[0])
+        if prev is not None and not all(term.admits(model, guess) for term in model.terms):
+            guess = q  # a secant through contact can carry the boundary through itself
         r = _newton(model, u_t, guess, load_t, tol, max_iter, None)
         its, nfac, steps = its + r.iterations, nfac + r.factorizations, steps + 1
         if r.status == CONVERGED:

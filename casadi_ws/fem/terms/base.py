@@ -103,6 +103,8 @@ class Term:
     holds."""
     rows = slice(0, 0)
     state = slice(0, 0)
+    grows = False
+    """Whether its pattern grows with the state (:meth:`casadi_ws.fem.model.StaticModel.grow_pattern`)."""
     contact = False
     """Whether its rows are contact points (:meth:`casadi_ws.fem.model.StaticModel.contact_terms`: Newton's
     contact safeguards, the contact reports)."""
@@ -177,6 +179,11 @@ class Term:
     def step_limit(self, model, q, dq) -> float:
         """The share of a Newton step dq (free dofs) it allows."""
         return 1.0
+
+    def admits(self, model, q) -> bool:
+        """Whether the state q may start a Newton solve (a predictor's guess may not, e.g. a boundary already
+        through itself where a barrier holds it apart)."""
+        return True
 
     def report(self, model, q) -> list[dict]:
         """What it reports at the state q (``contacts`` of an equilibrium): a dict per item, or none."""
