@@ -88,8 +88,8 @@ def test_the_trunk_tutorial_imports_as_its_scene_says():
 
 def test_the_trunk_tutorial_curls_into_itself_within_its_stroke():
     """What the trunk's own input box asks for: one long cable pulled to 30 % of its 70 mm stroke curls the
-    trunk without contact; at 40 % it passes through itself, which is reported as inadmissible (contact is
-    not modelled yet), so half the bounds cannot be an admissible equilibrium of this model."""
+    trunk without contact; at 40 % its disks pass through each other, which is reported as inadmissible: the
+    imported problem has no self-contact (tests/test_auto_contact.py adds ``self_contact: auto``)."""
     from casadi_ws.solvers.admissible import admissibility
 
     p = problem_from_dict(translate(TRUNK, out_dir=TRUNK.parent).problem, "<trunk>", TRUNK.parent)

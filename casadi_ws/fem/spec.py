@@ -17,7 +17,8 @@ from .contact import Obstacle
 from .materials import Material
 from .mesh import Mesh
 
-__all__ = ["AdmissibilitySettings", "ModelError", "ModelSpec", "SelfContactPair", "SolverSettings"]
+__all__ = ["AdmissibilitySettings", "AutoSelfContact", "ModelError", "ModelSpec", "SelfContactPair",
+           "SolverSettings"]
 
 
 class ModelError(ValueError):
@@ -80,6 +81,19 @@ class SelfContactPair:
 
 
 @dataclass
+class AutoSelfContact:
+    """Self-contact found as the body deforms (problem file: ``self_contact: auto``;
+    :class:`casadi_ws.fem.terms.AutoSelfContact`)."""
+
+    distance: float | None = None
+    """dhat (m): the barrier acts on pairs of the boundary closer than this; None: 0.1 % of the boundary's mean
+    edge. It bounds the gap a pressing contact keeps (the geometric error of the contact)."""
+    stiffness: float | None = None
+    """The barrier's stiffness kappa; None: a pair's stiffness at half its reach equals a boundary node's
+    (E h)."""
+
+
+@dataclass
 class ModelSpec:
     """What a static model is built from (SI units: m, N, Pa, kg/m^3)."""
 
@@ -113,6 +127,9 @@ class ModelSpec:
     """Rigid, fixed obstacles the body may not enter."""
     self_contact: list[SelfContactPair] = field(default_factory=list)
     """Pairs of the body's regions that may meet."""
+    self_contact_auto: AutoSelfContact | None = None
+    """Self-contact wherever the boundary meets itself (None: off; the ``self_penetration`` audit then
+    refuses states that pass through themselves)."""
     terms: list = field(default_factory=list)
     """Terms added to those the fields above make (:mod:`casadi_ws.fem.terms`): a problem file's ``springs``
     and ``pressure_loads``, or a user's own :class:`casadi_ws.fem.terms.Term`. Each model works on a copy."""

@@ -22,7 +22,7 @@ from ..fem.materials import FORMULATIONS, HYPERELASTIC_CONSTANTS, MATERIAL_MODEL
 from ..fem.silicones import SILICONES
 from ..fem.mesh import (Mesh, MeshError, box_mesh, closest_point_in_tet, embed, load_mesh, quadratic,
                         transform_points, trunk_mesh)
-from ..fem.spec import AdmissibilitySettings, ModelSpec, SelfContactPair, SolverSettings
+from ..fem.spec import AdmissibilitySettings, AutoSelfContact, ModelSpec, SelfContactPair, SolverSettings
 from ..solvers.linear import LINEAR_SOLVERS, available
 
 __all__ = [
@@ -771,18 +771,22 @@ def _read_obstacles(r: _Reader, lst, mesh: Mesh, base: Path) -> list:
     return out
 
 
-def _read_self_contact(r: _Reader, lst, mesh: Mesh) -> list:
-    """``self_contact``: each ``{name, points: <selection>, surface: <selection>}`` (selections as in
-    ``fixed``): the boundary nodes selected by ``points`` may not enter the boundary faces whose nodes are all
-    selected by ``surface``."""
+def _read_self_contact(r: _Reader, lst, mesh: Mesh) -> tuple[list, AutoSelfContact | None]:
+    """``self_contact``: ``auto`` (or ``{auto: true, distance: m, stiffness: ...}``): wherever the boundary
+    meets itself; or a list of declared pairs, each ``{name, points: <selection>, surface: <selection>}``
+    (selections as in ``fixed``): the boundary nodes selected by ``points`` may not enter the boundary faces
+    whose nodes are all selected by ``surface``. Returns (declared pairs, the auto settings or None)."""
     from ..fem.contact import split_faces
     from ..fem.surface import boundary_faces
     from ..fem.terms import SelfContact
 
     if lst is None:
-        return []
+        return [], None
+    if lst == "auto" or isinstance(lst, dict):
+        return [], _read_auto_contact(r, lst, mesh)
     if not isinstance(lst, list):
-        r.fail("self_contact", "expected a list of {name, points, surface}, each a selection as in 'fixed'")
+        r.fail("self_contact", "expected 'auto' (contact wherever the body meets itself) or a list of declared "
+                               "pairs {name, points, surface}, each a selection as in 'fixed'")
     faces = boundary_faces(mesh)
     out = []
     for i, s in enumerate(lst):
@@ -813,7 +817,34 @@ def _read_self_contact(r: _Reader, lst, mesh: Mesh) -> list:
             r.fail(key, f"{inside} of its {points.size} points lie on or behind its surface at rest (the points must "
                         f"be outside, on the side the surface faces)")
         out.append(SelfContactPair(name, points, tris, reach))
-    return out
+    return out, None
+
+
+def _read_auto_contact(r: _Reader, v, mesh: Mesh) -> AutoSelfContact:
+    """``self_contact: auto`` or its mapping form; refused where the boundary already meets itself at rest
+    closer than the barrier's reach (the barrier would load the body at rest) or passes through itself."""
+    from ..fem.collision import collision_surface_of_mesh, rest_clearance
+    from ..fem.terms.auto_contact import DISTANCE
+
+    key = "self_contact"
+    a = AutoSelfContact()
+    if isinstance(v, dict):
+        r.mapping(v, key, {"auto", "distance", "stiffness"})
+        if v.get("auto") is not True:
+            r.fail(f"{key}.auto", "expected true (the mapping form of 'self_contact: auto'); for declared pairs "
+                                  "give a list of {name, points, surface}")
+        a.distance = r.optional(v, "distance", key, lo=0.0, lo_open=True)
+        a.stiffness = r.optional(v, "stiffness", key, lo=0.0, lo_open=True)
+    surface = collision_surface_of_mesh(mesh)
+    clear, h = rest_clearance(surface, mesh.nodes)
+    dhat = a.distance if a.distance else DISTANCE * h
+    if not clear > dhat:
+        where = "passes through itself" if clear <= 0 else f"has parts {clear:.3g} m apart"
+        r.fail(f"{key}.distance" if a.distance else key,
+               f"the body's boundary at rest {where}, not farther than the contact distance {dhat:.3g} m: "
+               f"give a smaller distance (m) than {max(clear, 0):.3g}" if clear > 0 else
+               f"the body's boundary at rest {where}: self-contact cannot start from it (check the mesh)")
+    return a
 
 
 def _read_springs(r: _Reader, lst, mesh: Mesh) -> list:
@@ -991,13 +1022,14 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     task = _read_task(r, d.get("task"), base)
     admissibility = _read_admissibility(r, d.get("admissibility"))
     name = str(d.get("name", Path(source).stem))
-    self_contact = _read_self_contact(r, d.get("self_contact"), mesh)
+    self_contact, self_contact_auto = _read_self_contact(r, d.get("self_contact"), mesh)
     terms = springs + _read_pressure_loads(r, d.get("pressure_loads"), mesh)
     _unique_names(r, [("self_contact", p.name) for p in self_contact] +
                   [("springs" if t in springs else "pressure_loads", t.name) for t in terms])
     return Problem(mesh, material, fixed, cables + cavities, end_effector, gravity, loads, solver, name=name,
                    source=source, regions=regions, partial_fixed=partial_fixed, admissibility=admissibility,
-                   obstacles=obstacles, self_contact=self_contact, terms=terms, workspace=workspace, task=task)
+                   obstacles=obstacles, self_contact=self_contact, self_contact_auto=self_contact_auto, terms=terms,
+                   workspace=workspace, task=task)
 
 
 def read_yaml(path: str | Path, what: str = "problem file", error=None):

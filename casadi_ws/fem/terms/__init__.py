@@ -16,10 +16,11 @@ from .loads import Loads
 from .prescribed import Prescribed
 from .pressure import ContinuousPressure, pressure_functions
 from .pressure_load import PressureLoad
+from .auto_contact import AutoSelfContact
 from .self_contact import MLS_SLOTS, SelfContact
 from .springs import Springs
 
-__all__ = ["ActuatorData", "Actuators", "ContactGeometry", "ContactTerm", "ContinuousPressure", "ElementGroup",
+__all__ = ["ActuatorData", "Actuators", "AutoSelfContact", "ContactGeometry", "ContactTerm", "ContinuousPressure", "ElementGroup",
            "Elements", "Evaluation", "Loads", "MLS_SLOTS", "ObstacleContact", "Prescribed", "PressureLoad",
            "SelfContact", "Springs", "Term",
            "builtin_terms", "complementarity", "fischer_burmeister", "held_block", "point_pairs",
@@ -44,6 +45,9 @@ def builtin_terms(model) -> list[Term]:
     for pair in spec.self_contact:
         terms.append(SelfContact(pair.name, pair.points[moving[pair.points]], split_faces(pair.faces), spec.mesh.nodes,
                                  pos, spec.material.young_modulus, pair.reach))
+    if spec.self_contact_auto is not None:
+        a = spec.self_contact_auto
+        terms.append(AutoSelfContact(spec.material.young_modulus, a.distance, a.stiffness))
     th = elements.taylor_hood()
     if th.size:
         tets = spec.mesh.tets[th]

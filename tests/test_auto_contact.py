@@ -1,0 +1,137 @@
+"""Self-contact found as the body moves (``self_contact: auto``, issue 69): the declared pair's answer and beam
+theory on the stacked cantilevers, a finger curled onto its own base checked by an audit independent of the
+contact code (every boundary node against every tetrahedron), Newton's third law, finite differences, and
+bad input."""
+
+import numpy as np
+import pytest
+import yaml
+from conftest import REPO, nodes_inside_other_tetrahedra
+from test_self_contact import EI, GAP, L, T, _beams
+
+import casadi_ws as cw
+from casadi_ws import StaticModel, problem_from_dict, solve_equilibrium
+from casadi_ws.fem.spec import AutoSelfContact
+from casadi_ws.io.problem import ProblemError
+from casadi_ws.solvers.admissible import admissibility
+from casadi_ws.solvers.equilibrium import SAME_STATE, _apart, settle
+
+
+def _upper_force(m, q):
+    """The vertical force the lower beam pushes the upper one with: the contact forces on the upper beam's
+    nodes, summed (read off the residual's pieces, not the term's report)."""
+    f = m.contact_forces(q)[: m.n_mech].reshape(-1, 3)
+    return float(f[m.mesh.nodes[:, 2] > T + GAP / 2, 2].sum())
+
+
+def test_auto_self_contact_gives_the_declared_pairs_force_and_beam_theorys(tmp_path):
+    d = _beams(tmp_path)
+    declared = StaticModel(problem_from_dict(d, str(tmp_path / "beams.yaml"), tmp_path))
+    eq_d = solve_equilibrium(declared, np.zeros(1))
+    d["self_contact"] = "auto"
+    m = StaticModel(problem_from_dict(d, str(tmp_path / "beams.yaml"), tmp_path))
+    eq = solve_equilibrium(m, np.zeros(1))
+    assert eq_d.converged and eq.converged
+    R = 3 * EI * GAP / (2 * L**3)
+    F = _upper_force(m, eq.q)
+    assert F == pytest.approx(_upper_force(declared, eq_d.q), rel=0.005)  # measured +0.2 %
+    assert F == pytest.approx(R, rel=0.02)  # measured +0.5 %
+    (c,) = [c for c in m.contacts(eq.q) if c["kind"] == "self"]
+    assert c["points"] > 0 and c["force"] == pytest.approx(F, rel=0.005) and 0 < c["gap"] <= c["dhat"]
+    f = m.contact_forces(eq.q)[: m.n_mech].reshape(-1, 3)
+    assert np.abs(f.sum(axis=0)).max() <= 1e-9 * np.abs(f).sum()
+    assert not nodes_inside_other_tetrahedra(m, eq.q)
+    assert admissibility(m, eq.q, np.zeros(1), eq.factorization).admissible
+
+
+@pytest.fixture(scope="module")
+def curled_finger():
+    """SoftRobots' Finger (problems/sofa/finger) with ``self_contact: auto``, its cable pulled 70 mm: without
+    contact it passes through its own base from 55 mm on (tests/test_admissible.py)."""
+    p = cw.load_problem(REPO / "problems" / "sofa" / "finger" / "finger.yaml")
+    p.actuators[0].u_max = 0.09
+    p.self_contact_auto = AutoSelfContact()
+    m = StaticModel(p)
+    return m, cw.quasi_static(m, [0.07])
+
+
+def test_a_finger_curled_onto_its_base_presses_on_itself_and_not_through(curled_finger):
+    m, eq = curled_finger
+    assert eq.converged
+    assert not nodes_inside_other_tetrahedra(m, eq.q)
+    assert admissibility(m, eq.q, eq.u, eq.factorization).admissible
+    (c,) = [c for c in m.contacts(eq.q) if c["kind"] == "self"]
+    assert c["points"] > 0 and c["force"] > 1.0  # newtons: the curled end leans on the base
+    f = m.contact_forces(eq.q)[: m.n_mech].reshape(-1, 3)
+    assert np.abs(f.sum(axis=0)).max() <= 1e-9 * np.abs(f).sum()  # what it pushes, it is pushed back
+    # other load paths to the same input: in halves, and beyond it then back. Frictionless on a faceted base
+    # the curled end can rest in more than one way (measured: up to 53 um apart, 5e-3 of an element), so the
+    # package reports the state the path from rest in tenths reaches, whichever path found an answer
+    halves = solve_equilibrium(m, [0.07], q0=solve_equilibrium(m, [0.035]).q, u0=[0.035])
+    beyond = solve_equilibrium(m, [0.08], q0=eq.q, u0=eq.u)
+    back = solve_equilibrium(m, [0.07], q0=beyond.q, u0=beyond.u)
+    assert halves.converged and beyond.converged and back.converged
+    for other in (halves, back):
+        reported = settle(m, other, None)
+        assert _apart(m, reported.q, eq.q) <= SAME_STATE
+        assert reported.path_dependent == (_apart(m, other.q, eq.q) > SAME_STATE)
+
+
+def test_the_tangent_with_contact_matches_finite_differences(curled_finger):
+    m, eq = curled_finger
+    q, u = eq.q.copy(), eq.u
+    K = m.tangent(q, u)
+    rng = np.random.default_rng(0)
+    v = np.zeros(m.n_free)
+    v[: m.n_free_mech] = rng.standard_normal(m.n_free_mech)
+    errors = []
+    for h in (1e-9, 1e-10):  # central differences; contact gaps are ~1 um, so steps must be far below
+        qp, qm = q.copy(), q.copy()
+        qp[m.free] += h * v
+        qm[m.free] -= h * v
+        fd = (m.residual(qp, u) - m.residual(qm, u)) / (2 * h)
+        errors.append(np.linalg.norm(K @ v - fd) / np.linalg.norm(fd))
+    assert errors[1] <= 1e-6 and errors[1] < errors[0], errors
+
+
+def test_a_casadi_function_built_before_new_pairs_refuses_to_differentiate(curled_finger):
+    m0, eq = curled_finger
+    m = StaticModel(m0.spec)  # a new model: its pattern has the pairs of the rest state only
+    R = cw.residual_function(m)
+    J = R.jacobian()
+    with pytest.raises(Exception, match="pattern grew"):
+        J(eq.q[m.free], eq.u, np.zeros(m.n_free))
+
+
+@pytest.mark.parametrize("value, message", [
+    ("automatic", "expected 'auto'"),
+    ({"auto": False}, "self_contact.auto: expected true"),
+    ({"auto": True, "distance": 0.5}, "self_contact.distance: the body's boundary at rest has parts"),
+])
+def test_bad_self_contact_input_is_one_line(tmp_path, value, message):
+    d = _beams(tmp_path, order=1, divisions=(10, 1, 1))
+    d["self_contact"] = value
+    with pytest.raises(ProblemError, match=message) as e:
+        problem_from_dict(d, str(tmp_path / "beams.yaml"), tmp_path)
+    assert "\n" not in str(e.value)
+    (tmp_path / "beams.yaml").write_text(yaml.safe_dump(d))
+    from casadi_ws.cli import main
+
+    assert main(["equilibrium", str(tmp_path / "beams.yaml"), "--u", "0"]) == 2
+
+
+def test_the_sofa_trunk_curls_onto_itself_past_where_it_passed_through():
+    """The SoftRobots Trunk as imported (problems/sofa/trunk), one long cable at 60 % of its 70 mm stroke, the
+    other seven at rest: without contact its disks met at 34 % and passed through each other; with
+    ``self_contact: auto`` they press (docs/methods.md: the path goes on to a fold at 97.8 %)."""
+    p = cw.load_problem(REPO / "problems" / "sofa" / "trunk" / "trunk.yaml")
+    p.self_contact_auto = AutoSelfContact()
+    m = StaticModel(p)
+    u = np.zeros(m.n_u)
+    u[0] = 0.6 * m.u_max[0]
+    eq = cw.quasi_static(m, u)
+    assert eq.converged
+    (c,) = [c for c in m.contacts(eq.q) if c["kind"] == "self"]
+    assert c["points"] > 0 and c["force"] > 1.0
+    assert not nodes_inside_other_tetrahedra(m, eq.q)
+    assert admissibility(m, eq.q, eq.u, eq.factorization).admissible
