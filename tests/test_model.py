@@ -261,3 +261,28 @@ def test_a_model_and_what_other_layers_built_for_it_go_when_it_is_dropped():
     del model, fb
     gc.collect()
     assert ref() is None
+
+
+def test_a_cable_segment_whose_ends_meet_keeps_a_continuous_length_and_force():
+    """Two passage points on facing walls of a groove (the SOFA Trunk's disks) meet as it closes: the
+    segment's length is blended below 1 % of its rest length (casadi_ws.actuation.cable.SHORT), so the length
+    and its gradient stay continuous where the straight distance's gradient would flip; beyond the blend the
+    length is the distance itself."""
+    import casadi as ca
+
+    from casadi_ws import Cable
+    from casadi_ws.actuation.cable import SHORT
+
+    c = Cable(points=np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.006]]))
+    P = ca.SX.sym("P", 6)
+    L = ca.Function("L", [P], [c.quantity(P), ca.gradient(c.quantity(P), P)])
+    delta = SHORT * 0.006
+    for z in (0.006, 0.003, 1.5 * delta):  # straight: the distance and the unit vector
+        v, g = (np.asarray(a).ravel() for a in L([0, 0, 0, 0, 0, z]))
+        assert v == pytest.approx(z, rel=1e-15) and g[5] == pytest.approx(1.0, rel=1e-15)
+    z = np.linspace(-2 * delta, 2 * delta, 81)  # the second point passes through the first
+    vals = np.array([float(L([0, 0, 0, 0, 0, zz])[0]) for zz in z])
+    grads = np.array([float(L([0, 0, 0, 0, 0, zz])[1][5]) for zz in z])
+    assert np.all(np.abs(np.diff(vals)) <= 1.01 * (z[1] - z[0]))  # continuous, at most unit slope
+    assert np.all(np.abs(np.diff(grads)) <= 2 * (z[1] - z[0]) / delta)  # the gradient: no jump
+    assert vals.min() == pytest.approx(delta / 2)
