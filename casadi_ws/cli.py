@@ -64,6 +64,9 @@ def cmd_equilibrium(args) -> int:
     out = {"problem": problem.name, **eq.to_dict(), **checks, "stable_branch": branched, "actuators": actuators,
            "contacts": model.contacts(eq.q), "units": units}
     print(json.dumps(out, indent=None if args.compact else 2))
+    if "self_penetration" in checks["violations"] and problem.self_contact_auto is None:
+        print("casadi-ws: the body passes through itself at these inputs: with 'self_contact: auto' in the problem "
+              "file it presses on itself instead (docs/problem-format.md)", file=sys.stderr)
     return 0 if eq.converged and checks["admissible"] else 1
 
 

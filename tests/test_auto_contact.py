@@ -135,3 +135,12 @@ def test_the_sofa_trunk_curls_onto_itself_past_where_it_passed_through():
     assert c["points"] > 0 and c["force"] > 1.0
     assert not nodes_inside_other_tetrahedra(m, eq.q)
     assert admissibility(m, eq.q, eq.u, eq.factorization).admissible
+
+
+def test_an_equilibrium_through_itself_says_how_to_make_it_press(tmp_path, capsys):
+    from casadi_ws.cli import main
+
+    (tmp_path / "beams.yaml").write_text(yaml.safe_dump(_beams(tmp_path, contact=False)))
+    assert main(["equilibrium", str(tmp_path / "beams.yaml"), "--u", "0"]) == 1
+    err = capsys.readouterr().err
+    assert "passes through itself" in err and "self_contact: auto" in err

@@ -112,6 +112,9 @@ class WorkspaceResult:
             w.append(f"{len(self.arrays.get('excluded_violations', []))} verified equilibria were not admissible and "
                      f"are not reported ({', '.join(f'{k}: {v}' for k, v in excluded.items())}); see "
                      f"result.npz's excluded_* arrays")
+            if excluded.get("self_penetration"):
+                w.append(f"{excluded['self_penetration']} of them pass through themselves: with 'self_contact: auto' "
+                         f"in the problem file the body presses on itself instead (docs/problem-format.md)")
         if self.counters.get("path_dependent"):
             w.append(f"{self.counters['path_dependent']} equilibria depend on the path the inputs take (the robot "
                      f"loaded from a neighbouring point and from rest settles differently: buckling, snap-through or "
