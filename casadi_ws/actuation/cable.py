@@ -77,7 +77,7 @@ class Cable(Actuator):
         if self.pull_point is not None:
             pts = [ca.DM(np.asarray(self.pull_point, dtype=float))] + pts
         rest = np.linalg.norm(np.diff(self.polyline(), axis=0), axis=1) if len(pts) == len(self.polyline()) \
-            else np.full(len(pts) - 1, np.inf)
+            else np.zeros(len(pts) - 1)  # rest lengths unknown: no blend
         L = 0
         for a, b, l0 in zip(pts[:-1], pts[1:], rest):
             length, delta = ca.norm_2(b - a), SHORT * float(l0)

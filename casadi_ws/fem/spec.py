@@ -89,8 +89,8 @@ class AutoSelfContact:
     """dhat (m): the barrier acts on pairs of the boundary closer than this; None: 0.1 % of the boundary's mean
     edge. It bounds the gap a pressing contact keeps (the geometric error of the contact)."""
     stiffness: float | None = None
-    """The barrier's stiffness kappa; None: a pair's stiffness at half its reach equals a boundary node's
-    (E h)."""
+    """The barrier's stiffness kappa (N/m); None: a pair's stiffness at half its reach is 1000 times a boundary
+    node's, E h (:data:`casadi_ws.fem.terms.auto_contact.STIFFNESS`)."""
 
 
 @dataclass

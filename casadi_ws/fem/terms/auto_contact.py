@@ -57,8 +57,8 @@ class AutoSelfContact(Term):
         """dhat (m): the barrier acts on pairs closer than this; None: :data:`DISTANCE` of the boundary's mean
         edge."""
         self.stiffness = stiffness
-        """kappa (N/m^2 ... of the physical barrier): None for E h / b''(dhat / 2), a pair's stiffness at half
-        its reach equal to a boundary node's."""
+        """kappa (N/m, the physical barrier's): None for STIFFNESS E h / b''(dhat / 2), a pair's stiffness at
+        half its reach STIFFNESS times a boundary node's."""
 
     # ---------------------------------------------------------------- building
     def setup(self, model, pos):
