@@ -721,3 +721,49 @@ def test_a_cavity_a_little_outside_the_body_is_embedded_as_sofa_maps_it(tmp_path
     _load(tr, tmp_path)
     with pytest.raises(SceneError, match=r"cavities\[0\].surface: vertex .* lies 0.004 m from the mesh"):
         translate(_scene(tmp_path, _BODY.format(transform=""), cavity.format("far.stl")), out_dir=tmp_path)
+
+
+def test_a_body_that_collides_with_itself_in_sofa_gets_self_contact_auto(tmp_path):
+    _box_file(tmp_path)
+    collision = """\
+    collision = body.addChild('collision')
+    collision.addObject('MeshTopology', src='@../loader')
+    collision.addObject('MechanicalObject')
+    collision.addObject('TriangleCollisionModel', name='tri', selfCollision={flag})
+    collision.addObject('PointCollisionModel', selfCollision={flag})
+    collision.addObject('IdentityMapping')
+"""
+    pipeline = """\
+    root.addObject('CollisionPipeline')
+    root.addObject('BruteForceBroadPhase')
+    root.addObject('BVHNarrowPhase')
+    root.addObject('LocalMinDistance', alarmDistance=2, contactDistance=0.5)
+    root.addObject('CollisionResponse', response='FrictionContactConstraint')
+"""
+    tr = translate(_scene(tmp_path, _BODY.format(transform=""), collision.format(flag=True) + pipeline),
+                   out_dir=tmp_path)
+    assert tr.problem["self_contact"] == "auto"
+    assert not any("Collision" in line or "LocalMinDistance" in line for line in tr.untranslated)
+    assert any("-> self_contact: auto" in n for n in tr.notes)
+    assert _load(tr, tmp_path).self_contact_auto is not None
+    # selfCollision off: SOFA lets the body pass through itself, and so does the problem, with a note saying how
+    tr = translate(_scene(tmp_path, _BODY.format(transform=""), collision.format(flag=False) + pipeline),
+                   out_dir=tmp_path)
+    assert "self_contact" not in tr.problem
+    assert any("selfCollision off" in n and "self_contact: auto" in n for n in tr.notes)
+    # no pipeline: SOFA detects nothing
+    tr = translate(_scene(tmp_path, _BODY.format(transform=""), collision.format(flag=True)), out_dir=tmp_path)
+    assert "self_contact" not in tr.problem and any("no collision pipeline" in n for n in tr.notes)
+    # two collision surfaces of one body in different groups collide in SOFA (the Trunk tutorial's selfCollision)
+    parts = "".join(f"""\
+    part{i} = body.addChild('part{i}')
+    part{i}.addObject('MeshTopology', src='@../loader')
+    part{i}.addObject('MechanicalObject')
+    part{i}.addObject('TriangleCollisionModel', group={group})
+    part{i}.addObject('BarycentricMapping')
+""" for i, group in enumerate((0, 1)))
+    tr = translate(_scene(tmp_path, _BODY.format(transform=""), parts + pipeline), out_dir=tmp_path)
+    assert tr.problem["self_contact"] == "auto"
+    tr = translate(_scene(tmp_path, _BODY.format(transform=""), parts.replace("group=1", "group=0") + pipeline),
+                   out_dir=tmp_path)
+    assert "self_contact" not in tr.problem

@@ -27,6 +27,8 @@ Everything else is listed, one line per component type, as not translated.
 
 from __future__ import annotations
 
+import itertools
+
 import json
 import os
 from dataclasses import dataclass, field
@@ -305,6 +307,7 @@ def translate(path: str | Path, units: str | None = None, out_dir: str | Path | 
     _actuators(sc)
     _loads(sc)
     _obstacles(sc)
+    _self_collision(sc)
     _effector(sc)
     tr.untranslated = _leftovers(sc, sc.used)
     _open_strokes(sc)
@@ -678,6 +681,50 @@ def _obstacles(sc: _Scene) -> None:
     if out:
         sc.tr.problem["obstacles"] = out
         sc.tr.comments["obstacles"] = "fixed rigid objects and collision surfaces of the scene"
+
+
+_PIPELINE = ("CollisionPipeline", "DefaultPipeline", "BruteForceBroadPhase", "BruteForceDetection",
+             "BVHNarrowPhase", "ParallelBruteForceBroadPhase", "ParallelBVHNarrowPhase", "CollisionResponse",
+             "DefaultContactManager", "RuleBasedContactManager", "LocalMinDistance", "MinProximityIntersection",
+             "NewProximityIntersection", "DiscreteIntersection")
+
+
+def _self_collision(sc: _Scene) -> None:
+    """A collision surface of the body with ``selfCollision`` on, in a scene with a collision pipeline, is SOFA
+    letting the body press on itself: ``self_contact: auto`` (found as it moves, never passing through itself).
+    Collision models of the body without it: SOFA lets the body pass through itself, which casadi-ws would
+    too; the note says how to forbid it."""
+    mine = [o for n in sc.body.walk() for o in _objects(n, _COLLISION_MODELS)]
+    if not mine:
+        return
+    pipeline = [o for n in sc.nodes for o in n.objects if o.type in _PIPELINE]
+    selfish = [o for o in mine if _bool(o.data.get("selfCollision"), False)] or _facing_parts(sc.body)
+    if selfish and pipeline:
+        sc.tr.problem["self_contact"] = "auto"
+        sc.tr.comments["self_contact"] = (f"{selfish[0].type} '{selfish[0].name}' selfCollision at "
+                                          f"{selfish[0].path()}: the body presses on itself (barrier, frictionless)")
+        sc.tr.notes.append(f"self-collision of {sc.body.path()} (selfCollision on {len(selfish)} collision models) "
+                           f"-> self_contact: auto, frictionless; the contact distance and stiffness are casadi-ws's "
+                           f"own (docs/problem-format.md), not SOFA's alarmDistance/contactDistance")
+        sc.used.update(id(o) for o in mine + pipeline)
+    elif selfish:
+        sc.tr.notes.append(f"{selfish[0].path()} asks for selfCollision but the scene has no collision pipeline: "
+                           f"SOFA detects no contact, so neither does the problem (add self_contact: auto to forbid "
+                           f"the body passing through itself)")
+    else:
+        sc.tr.notes.append(f"the collision models of {sc.body.path()} have selfCollision off: in SOFA the body may pass "
+                           f"through itself; add self_contact: auto if it curls onto itself")
+
+
+def _facing_parts(body: Node) -> list:
+    """Collision models of the body on two different nodes (two surfaces, each mapped on it) whose groups do
+    not share a number: SOFA lets them collide (the Trunk tutorial's ``addCollisionModel(selfCollision=True)``
+    puts its two collision meshes in groups 0 and 1)."""
+    parts = [(n, o) for n in body.walk() for o in _objects(n, _COLLISION_MODELS)]
+    for (na, a), (nb, b) in itertools.combinations(parts, 2):
+        if na is not nb and not set(_ints(a.data.get("group", []))) & set(_ints(b.data.get("group", []))):
+            return [a, b]
+    return []
 
 
 def _absorb(sc: _Scene, node: Node) -> None:
