@@ -142,3 +142,16 @@ def test_an_equilibrium_through_itself_says_how_to_make_it_press(tmp_path, capsy
     assert main(["equilibrium", str(tmp_path / "beams.yaml"), "--u", "0"]) == 1
     err = capsys.readouterr().err
     assert "passes through itself" in err and "self_contact: auto" in err
+
+
+def test_a_candidate_search_that_explodes_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys):
+    from casadi_ws.cli import main
+    from casadi_ws.fem.terms import auto_contact
+
+    d = _beams(tmp_path)
+    d["self_contact"] = "auto"
+    (tmp_path / "beams.yaml").write_text(yaml.safe_dump(d))
+    monkeypatch.setattr(auto_contact, "MAX_PAIRS", 1e-3)  # the beams press with a few pairs: over the cap
+    assert main(["equilibrium", str(tmp_path / "beams.yaml"), "--u", "0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "candidate search explodes" in err[0] and "self_contact.distance" in err[0]
