@@ -209,13 +209,30 @@ def test_seeds_cover_the_faces_of_up_to_four_inputs_and_ignore_an_input_without_
     assert len(s.nodes) == 5**4 - 3**4 - 4 * 2 * 3**3 == 328
     s.offer(np.array([0.0, 0.0, 0.3, 0.6]), np.zeros(3), np.zeros((3, 4)))
     assert len(s.of()) == 328 and len(s.configs) == 1
-    # a fixed input (u_min == u_max) has no surface to seed, nor have 5 inputs: no nodes, offers are no-ops
-    for lo, hi in (([0.0, 0.0, 0.0], [1.0, 0.0, 1.0]), ([0.0] * 5, [1.0] * 5)):
-        model = SimpleNamespace(u_min=np.array(lo), u_max=np.array(hi), n_u=len(lo))
-        s = Seeds(model, BoundarySettings())
-        with np.errstate(all="raise"):
-            s.offer(np.array(hi), np.zeros(3), np.zeros((3, 3)))
-        assert len(s.nodes) == 0 and s.of() == {} and len(s.arrays()["seed_u"]) == 0
+    # 5 inputs: no nodes, offers are no-ops
+    model = SimpleNamespace(u_min=np.zeros(5), u_max=np.ones(5), n_u=5)
+    s = Seeds(model, BoundarySettings())
+    s.offer(np.ones(5), np.zeros(3), np.zeros((3, 5)))
+    assert len(s.nodes) == 0 and s.of() == {} and len(s.arrays()["seed_u"]) == 0
+    # a fixed input (u_min == u_max) is no dimension of U: the one face of the two others, offers without 0/0
+    model = SimpleNamespace(u_min=np.zeros(3), u_max=np.array([1.0, 0.0, 1.0]), n_u=3)
+    s = Seeds(model, BoundarySettings())
+    with np.errstate(all="raise"):
+        s.offer(np.array([1.0, 0.0, 1.0]), np.zeros(3), np.zeros((3, 3)))
+    assert len(s.nodes) == 25 and len(s.of()) == 25
+
+
+def test_an_input_held_at_one_value_is_no_dimension_of_the_box(trunk3):
+    # the 3-cable trunk with its third cable held at zero: its workspace is the face u3 = 0 of the full one
+    full = boundary(trunk3, BoundarySettings(n=5))
+    pb = small_trunk(n_cables=3)
+    pb.actuators[2].u_max = pb.actuators[2].u_min
+    b = boundary(StaticModel(pb), BoundarySettings(n=5))
+    assert b.method == "input-patch" and b.area > 0 and len(b.vertices) == 25 and len(b.curve) == 16
+    assert np.all(b.u[:, 2] == pb.actuators[2].u_min)
+    for u, p in zip(b.u, b.vertices):
+        (k,) = np.flatnonzero(np.all(np.isclose(full.u, u), axis=1))
+        assert np.allclose(full.vertices[k], p, atol=1e-9)
 
 
 def test_forward_backward_reports_the_boundary_volume_and_maps(fb_dir):

@@ -165,9 +165,9 @@ class Seeds:
     exploration has one, predicts the node to second order, see :func:`_solve_nodes`)."""
 
     def __init__(self, model, settings: BoundarySettings):
-        self.lo, self.span = model.u_min, model.u_max - model.u_min
-        n_u, n = model.n_u, int(settings.n)
-        faces = two_faces(n_u) if 2 <= n_u <= MAX_SEEDED_INPUTS and np.all(self.span > 0) else []  # (2: one face)
+        self.box = _Box(model)
+        n_u, n = self.box.n, int(settings.n)
+        faces = two_faces(n_u) if 2 <= n_u <= MAX_SEEDED_INPUTS else []  # (2: one face)
         self.nodes = (np.unique(np.concatenate([_face_nodes(f, n, n_u).reshape(-1, n_u) for f in faces]), axis=0)
                       if faces else np.zeros((0, n_u)))
         self.dist = np.full(len(self.nodes), np.inf)
@@ -178,7 +178,7 @@ class Seeds:
     def offer(self, u, q, S, Q=None) -> None:
         if not len(self.nodes) or q is None or S is None:
             return
-        d = np.abs(self.nodes - (u - self.lo) / self.span).max(axis=1)
+        d = np.abs(self.nodes - self.box.unit(u)).max(axis=1)
         better = d < self.dist
         if better.any():
             self.dist[better] = d[better]
@@ -199,7 +199,7 @@ class Seeds:
         at = {w: k for k, w in enumerate(used)}
         cfg = [self.configs[w] for w in used]
         return {"seed_which": np.array([at.get(w, -1) for w in self.which.tolist()], dtype=np.int64),
-                "seed_dist": self.dist, "seed_u": np.array([c[0] for c in cfg]).reshape(len(cfg), len(self.lo)),
+                "seed_dist": self.dist, "seed_u": np.array([c[0] for c in cfg]).reshape(len(cfg), len(self.box.lo)),
                 "seed_q": np.array([c[1] for c in cfg]).reshape(len(cfg), -1) if cfg else np.zeros((0, 0)),
                 "seed_S": np.array([c[2] for c in cfg], dtype=np.float32) if cfg else np.zeros((0, 0, 0), np.float32),
                 **_stacked_Q([c[3] for c in cfg])}
@@ -223,6 +223,26 @@ def _stacked_Q(Qs: list) -> dict:
 
 def _key(s):
     return tuple(np.rint(np.asarray(s) * 720720).astype(np.int64).tolist())  # exact for n - 1 | 720720
+
+
+class _Box:
+    """The box U over the inputs that have a range (an input with u_min = u_max, a cable held at its rest
+    length, is no dimension of it): unit coordinates of those inputs, and back to u."""
+
+    def __init__(self, model):
+        self.lo, span = model.u_min, model.u_max - model.u_min
+        self.active = np.flatnonzero(span > 0)
+        self.span = span[self.active]
+        self.n = self.active.size
+
+    def unit(self, u) -> np.ndarray:
+        return (np.asarray(u)[..., self.active] - self.lo[self.active]) / self.span
+
+    def u(self, s) -> np.ndarray:
+        s = np.asarray(s, dtype=float)
+        out = np.broadcast_to(self.lo, s.shape[:-1] + self.lo.shape).copy()
+        out[..., self.active] += s * self.span
+        return out
 
 
 def _solve_nodes(model, us: np.ndarray, seeds: list | None = None):
@@ -364,24 +384,23 @@ def boundary(model, settings: BoundarySettings | None = None, executor=None, pro
     n = int(settings.n)
     if n < 3 or n % 2 == 0:
         raise ValueError(f"boundary: n must be odd and >= 3, got {n}")
-    n_u = model.n_u
-    span = model.u_max - model.u_min
-    if n_u < 2 or n_u > MAX_INPUTS or np.any(span <= 0):
-        why = (f"{n_u} inputs, C(n,2) 2^(n-2) = {len(two_faces(n_u)) if n_u <= 12 else 'too many'} faces"
-               if n_u > MAX_INPUTS else "fewer than two inputs with a range")
-        return Boundary(np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros((0, n_u)), "none",
+    n_u = _Box(model).n
+    if n_u < 2 or n_u > MAX_INPUTS:
+        why = (f"{n_u} inputs with a range, C(n,2) 2^(n-2) = {len(two_faces(n_u)) if n_u <= 12 else 'too many'} "
+               f"faces" if n_u > MAX_INPUTS else "fewer than two inputs with a range")
+        return Boundary(np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros((0, model.n_u)), "none",
                         notes=[f"no boundary surface ({why}); the volume is the cells'"])
     nodes = _Nodes(model, executor, problem, known, seeds.of() if seeds is not None else {})
     known_keys = set(nodes.tip)
-    b = _surface(model, nodes, n)
+    b = _surface(nodes, n)
     b.counters = {"solved_nodes": len(nodes.used - known_keys), "known_nodes": len(nodes.used & known_keys),
                   "seeded_nodes": len((nodes.used - known_keys) & set(nodes.seeds)),
                   "factorizations": nodes.factorizations}
     return b
 
 
-def _surface(model, nodes, n) -> Boundary:
-    n_u = model.n_u
+def _surface(nodes, n) -> Boundary:
+    n_u = nodes.box.n
     if n_u == 2:
         out = nodes.solve([(0, 1, {})], n)
         return out if isinstance(out, Boundary) else _patch(*out, n)
@@ -417,20 +436,20 @@ class _Nodes:
 
     def __init__(self, model, executor, problem, known, seeds):
         self.model, self.executor, self.problem, self.seeds = model, executor, problem, seeds
-        self.lo, self.span = model.u_min, model.u_max - model.u_min
+        self.box = _Box(model)
         self.tip, self.viol = {}, {}
         self.used = set()  # the nodes of every face asked for
         self.factorizations = 0
         if known is not None:
             for u, p in zip(np.asarray(known[0]), np.asarray(known[1])):
                 if np.all(np.isfinite(p)):
-                    self.tip[_key((u - self.lo) / self.span)] = np.asarray(p, float)
-                    self.viol[_key((u - self.lo) / self.span)] = 0
+                    self.tip[_key(self.box.unit(u))] = np.asarray(p, float)
+                    self.viol[_key(self.box.unit(u))] = 0
 
     def solve(self, faces, n):
         """(V, U, violations, face triangles [fine, every other node]) over ``faces``' n x n nodes, or a
         :class:`Boundary` saying that some did not converge."""
-        n_u = self.model.n_u
+        n_u = self.box.n
         grids = [_face_nodes(f, n, n_u).reshape(-1, n_u) for f in faces]
         keys = {}
         for g in grids:
@@ -443,7 +462,7 @@ class _Nodes:
             workers = getattr(self.executor, "workers", 1) if self.executor is not None else 1
             chunks = [c for c in np.array_split(np.arange(len(order)), workers) if len(c)]
             # each piece gets the seeds of its own nodes (a configuration seeding several is sent once)
-            jobs = [(self.lo + np.array([keys[order[m]] for m in c]) * self.span,
+            jobs = [(self.box.u(np.array([keys[order[m]] for m in c])),
                      list({id(sd): sd for sd in (self.seeds.get(order[m]) for m in c) if sd is not None}.values()))
                     for c in chunks]
             if self.executor is None or len(jobs) == 1 and workers == 1:
@@ -458,7 +477,7 @@ class _Nodes:
         names = list(keys)
         index = {k: m for m, k in enumerate(names)}
         V = np.array([self.tip.get(k, np.full(3, np.nan)) for k in names])
-        U = self.lo + np.array([keys[k] for k in names]) * self.span
+        U = self.box.u(np.array([keys[k] for k in names]))
         vmask = np.array([self.viol.get(k, 0) for k in names], dtype=np.int64)
         failed = int(np.count_nonzero(~np.isfinite(V[:, 0])))
         if failed:
@@ -486,7 +505,8 @@ def _patch(V, U, vmask, face_tris, n) -> Boundary:
 def _grid_ids(V, U, n):
     """The vertex ids of a 2-input patch as an (n, n) array."""
     lo, hi = U.min(0), U.max(0)
-    rc = np.rint((U - lo) / np.where(hi > lo, hi - lo, 1) * (n - 1)).astype(int)
+    free = hi > lo  # the two inputs with a range
+    rc = np.rint((U[:, free] - lo[free]) / (hi - lo)[free] * (n - 1)).astype(int)
     ids = np.zeros((n, n), dtype=int)
     ids[rc[:, 0], rc[:, 1]] = np.arange(len(U))
     return ids
