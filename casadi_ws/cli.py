@@ -160,9 +160,11 @@ def cmd_solve(args) -> int:
 
         if args.nd < 1:
             raise UsageError(f"--nd: expected an integer >= 1, got {args.nd}")
-        if args.nd ** problem.n_u > 10**8 and not args.force:
-            raise UsageError(f"--nd: {args.nd}^{problem.n_u} = {args.nd ** problem.n_u:.3g} equilibria; "
-                             f"pass --force to run that many")
+        from .workspace.forward import grid_inputs
+
+        k = grid_inputs(problem)
+        if args.nd ** k > 10**8 and not args.force:
+            raise UsageError(f"--nd: {args.nd}^{k} = {args.nd ** k:.3g} equilibria; pass --force to run that many")
         out, mode = _prepare_out(args.out, args.overwrite, args.resume)
         if args.stride is not None and args.stride < 1:
             raise UsageError(f"--stride: expected an integer >= 1, got {args.stride}")

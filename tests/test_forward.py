@@ -313,3 +313,19 @@ def test_lines_and_planes_interpolated_across_match_the_lines_solved_one_by_one(
     again = sweep(m, us, s, resume=dict(saved[2]))
     np.testing.assert_array_equal(again.status, full.status)
     assert np.nanmax(np.abs(again.tips - full.tips)) < 1e-8
+
+
+def test_an_input_held_at_one_value_is_no_axis_of_the_grid():
+    assert input_grid([0.0, 1.0, 0.0], [2.0, 1.0, 4.0], 3).tolist() == [
+        [0, 1, 0], [0, 1, 2], [0, 1, 4], [1, 1, 4], [1, 1, 2], [1, 1, 0], [2, 1, 0], [2, 1, 2], [2, 1, 4]]
+    # the 3-cable trunk with its middle cable held at its lower bound: the plane u2 = 0 of the full grid, the
+    # same points (interpolated across lines, planes and workers as each grid is)
+    pb = small_trunk("corotational", n_cables=3)
+    full = forward(pb, settings=ForwardSettings(n_d=7, progress=False))
+    pb.actuators[1].u_max = pb.actuators[1].u_min
+    for workers in (1, 2):
+        held = forward(pb, settings=ForwardSettings(n_d=7, progress=False, workers=workers))
+        assert len(held.u) == 49 and np.all(held.u[:, 1] == pb.actuators[1].u_min)
+        for u, p in zip(held.u, held.points):
+            (k,) = np.flatnonzero(np.all(full.u == u, axis=1))
+            assert np.abs(full.points[k] - p).max() < 1e-8

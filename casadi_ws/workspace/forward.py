@@ -97,12 +97,22 @@ def snake_order(n_d: int, n_u: int) -> np.ndarray:
 
 
 def input_grid(u_min, u_max, n_d: int) -> np.ndarray:
-    """The inputs of the forward grid in snake order, (n_d^n_u, n_u)."""
+    """The inputs of the forward grid in snake order, (n_d^k, n_u) for the k inputs with a range: an input held
+    at one value (u_min = u_max, a cable kept at its rest length) is no axis of the grid (n_d copies of every
+    point otherwise: the SOFA Trunk with its four short cables held, 11^8 equilibria for 11^4)."""
     u_min, u_max = np.asarray(u_min, float), np.asarray(u_max, float)
     axes = np.linspace(0.0, 1.0, n_d) if n_d > 1 else np.zeros(1)
-    idx = snake_order(n_d, u_min.size)
+    active = np.flatnonzero(u_max > u_min)
+    idx = np.zeros((n_d ** active.size if active.size else 1, u_min.size), dtype=np.int64)
+    if active.size:
+        idx[:, active] = snake_order(n_d, active.size)
     # clip: u_min + 1.0 (u_max - u_min) can exceed u_max by an ulp, which the bounds check would refuse
     return np.clip(u_min + axes[idx] * (u_max - u_min), u_min, u_max)
+
+
+def grid_inputs(problem) -> int:
+    """How many inputs span the forward grid (those with a range; ``problem`` or a model)."""
+    return int(np.count_nonzero(np.asarray(problem.u_max, float) > np.asarray(problem.u_min, float)))
 
 
 def lagrange_weights(xs, x) -> np.ndarray:
@@ -438,9 +448,9 @@ def _solve_plane(model, us, first, settings, tol, sw: _Sweep, counters, L: int):
     ``across``-th line solved by :func:`_solve_line`, the lines between interpolated across lines and
     verified. Returns the equilibria, admissibility masks and maps of its points."""
     lines = [np.arange(a, min(a + L, len(us))) for a in range(0, len(us), L)]
-    ax, lax = model.n_u - 2, model.n_u - 1
+    ax, lax = np.flatnonzero(model.u_max > model.u_min)[-2:]
     x = np.array([us[idx[0], ax] for idx in lines])
-    newton = _grid_positions(len(lines), across_stride(settings, model.n_u, len(lines)),
+    newton = _grid_positions(len(lines), across_stride(settings, grid_inputs(model), len(lines)),
                              len(lines) > 1 and bool(x[-1] < x[0]))
     eqs = [None] * len(us)
     masks = np.zeros(len(us), dtype=np.int64)
@@ -575,7 +585,8 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
     last_save = time.perf_counter()
     done = first  # points whose results, history and counters are all recorded
     # the unit of work (and of checkpoints): a plane of lines where lines are interpolated across, else a line
-    P = L * L if model.n_u >= 2 and across_stride(settings, model.n_u, L) > 1 else L
+    k = grid_inputs(model)
+    P = L * L if k >= 2 and across_stride(settings, k, L) > 1 else L
     try:
         with deferred_interrupt() as ctrl_c:
             for a in range(first, n, P):
@@ -652,7 +663,7 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
                                          "store_states", "stride", "across")} | {"workers": workers, "format": 9})
     run = RunState(checkpoint_dir, "forward", fp, resume, t0)
     try:
-        cube = across_planes(problem.n_u, model.n_dof, settings)
+        cube = grid_inputs(problem) == problem.n_u and across_planes(problem.n_u, model.n_dof, settings)
         if workers == 1 and not cube:
             resume_state = None
             if run.saved is not None:
@@ -706,7 +717,8 @@ def _parallel(problem, us, settings, workers, bar, run: RunState, executor: Exec
     """Slices of whole grid lines, several per worker; each completed slice is checkpointed."""
     L = settings.n_d
     # whole planes where lines are interpolated across them (see sweep), else whole lines
-    unit = L * L if problem.n_u >= 2 and across_stride(settings, problem.n_u, L) > 1 else L
+    k = grid_inputs(problem)
+    unit = L * L if k >= 2 and across_stride(settings, k, L) > 1 else L
     n_units = max(1, len(us) // unit)
     # two pieces per worker: each starts cold (~1 s of continuation from rest), so more cost more
     pieces = [np.arange(units[0] * unit, (units[-1] + 1) * unit)
