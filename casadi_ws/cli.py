@@ -26,7 +26,7 @@ def _parse_u(text: str, n_u: int) -> np.ndarray:
     except ValueError:
         raise UsageError(f"--u: expected {n_u} comma-separated numbers, got {text!r}") from None
     if u.size != n_u:
-        raise UsageError(f"--u: the problem has {n_u} cable(s), got {u.size} value(s): {text!r}")
+        raise UsageError(f"--u: the problem has {n_u} actuator(s), got {u.size} value(s): {text!r}")
     if not np.all(np.isfinite(u)):
         raise UsageError(f"--u: values must be finite, got {text!r}")
     return u
@@ -456,14 +456,24 @@ def _study_parser(sub) -> None:
     st.set_defaults(func=cmd_study)
 
 
+def _version() -> str:
+    from . import __version__
+
+    return __version__
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="casadi-ws", description="Reachable workspace of soft robots (FEM + CasADi).")
     p.add_argument("--debug", action="store_true", help="show Python tracebacks on errors")
+    p.add_argument("--version", action="version", version=f"casadi-ws {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
 
-    e = sub.add_parser("equilibrium", help="solve the static equilibrium for given cable tensions")
+    e = sub.add_parser("equilibrium", help="solve the static equilibrium for given actuator inputs")
     e.add_argument("problem", help="problem YAML file")
-    e.add_argument("--u", required=True, help="cable tensions in N, comma-separated, e.g. 10,20")
+    e.add_argument("--u", required=True,
+                   help="the actuators' inputs, comma-separated in the problem's order, each in its own unit: a "
+                        "cable's tension in N (its shortening in m with control: displacement), a cavity's "
+                        "pressure in Pa (its volume in m^3 with control: volume); e.g. 10,20")
     e.add_argument("--compact", action="store_true", help="print the JSON on one line")
     e.set_defaults(func=cmd_equilibrium)
 
@@ -536,7 +546,8 @@ def build_parser() -> argparse.ArgumentParser:
         r.add_argument("--tolerance", type=float, default=1e-6, help="reachable if within this distance (m)")
         r.add_argument("--regularization", type=float, default=0.0,
                        help="weight (m^2/N^2) of |u|^2 (reach) or |u - u_previous|^2 (follow)")
-        r.add_argument("--max-du", type=float, default=None, help="largest change of each tension per solve (N)")
+        r.add_argument("--max-du", type=float, default=None,
+                       help="largest change of each input per solve (in its unit: N, m, Pa or m^3)")
         r.add_argument("--method", choices=("reduced", "ipopt"), default="reduced",
                        help="reduced: Gauss-Newton in the tensions on verified equilibria (fast; IPOPT where it "
                             "stalls); ipopt: the full-space NLP over displacements and tensions")
@@ -551,7 +562,7 @@ def build_parser() -> argparse.ArgumentParser:
     _study_parser(sub)
 
     d = sub.add_parser("demo", help="forward workspace of the built-in default problem (2-cable trunk)")
-    d.add_argument("--nd", type=int, default=11, help="values per cable")
+    d.add_argument("--nd", type=int, default=11, help="values per actuator")
     d.add_argument("--out", default="results/demo", help="output directory (replaced)")
     d.set_defaults(func=cmd_demo)
     return p

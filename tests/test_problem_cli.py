@@ -89,10 +89,23 @@ def test_malformed_yaml_and_wrong_u(tmp_path):
     r = run_cli("equilibrium", p, "--u", "1")
     assert r.returncode == 2 and "malformed YAML: line" in r.stderr
     r = run_cli("equilibrium", REPO / "problems" / "trunk_2cables.yaml", "--u", "1,2,3")
-    assert r.returncode == 2 and "has 2 cable(s), got 3" in r.stderr
+    assert r.returncode == 2 and "has 2 actuator(s), got 3" in r.stderr
 
 
 def test_numbers_written_without_exponent_sign_are_accepted():
     d = yaml.safe_load(yaml.safe_dump(DEFAULT_PROBLEM))
     d["material"]["young_modulus"] = "2e6"  # how PyYAML reads `young_modulus: 2e6`
     assert problem_from_dict(d).material.young_modulus == 2e6
+
+
+def test_version_is_the_packages_and_help_names_each_inputs_unit():
+    import tomllib
+
+    from casadi_ws import __version__
+
+    with open(REPO / "pyproject.toml", "rb") as f:
+        assert tomllib.load(f)["project"]["version"] == __version__
+    r = run_cli("--version")
+    assert r.returncode == 0 and r.stdout.strip() == f"casadi-ws {__version__}"
+    r = run_cli("equilibrium", "--help")
+    assert all(w in " ".join(r.stdout.split()) for w in ("tension in N", "shortening in m", "pressure in Pa"))
