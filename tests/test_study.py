@@ -161,7 +161,7 @@ def test_an_invalid_design_is_recorded_as_failed_and_the_study_goes_on(tmp_path)
     res = cw.run_study(cw.load_study(path), tmp_path / "out", progress=False)
     by = {t.params["cables[*].trunk_routing.radius"]: t for t in res.trials}
     assert by[0.008].status == "complete"
-    assert by[0.05].status == "failed" and "outside the mesh" in by[0.05].reason
+    assert by[0.05].status == "failed" and "outside the body" in by[0.05].reason
     assert "cables[0].points" in by[0.05].reason
     assert res.best.number == by[0.008].number
 

@@ -114,6 +114,12 @@ class Mesh:
     def characteristic_length(self) -> float:
         return float(np.linalg.norm(self.nodes.max(0) - self.nodes.min(0)))
 
+    def element_sizes(self) -> np.ndarray:
+        """The mean corner-to-corner edge of each element (m)."""
+        X = self.nodes[self.corners]
+        return np.mean([np.linalg.norm(X[:, a] - X[:, b], axis=1)
+                        for a, b in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))], axis=0)
+
 
 # First bytes of the formats SOFA scenes ship, for files whose extension lies (a SoftRobots tutorial's
 # ``diamond.vtk`` is an XML VTU file): (marker, meshio format name)
