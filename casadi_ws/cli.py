@@ -98,8 +98,10 @@ def _prepare_out(path: str, overwrite: bool, resume: bool = False) -> tuple[Path
 
 def _print_finished(out: Path) -> int:
     s = json.loads((out / "summary.json").read_text())
+    f = s.get("failures") or {"prefiltered": 0, "not_reached": 0, "failed": s["n_failed"]}
+    why = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in f.items() if v or k == "failed")
     print(f"{out}: the run is complete, nothing to resume: {s['method']}, {s['n_points']} reachable points, "
-          f"{s['n_failed']} failed, {s['time_s']:.1f} s")
+          f"{why}, {s['time_s']:.1f} s")
     for w in s.get("warnings", []):
         print(f"casadi-ws: warning: {w}", file=sys.stderr)
     return 0

@@ -451,6 +451,8 @@ def test_cli_fb_and_compare(tmp_path):
     r = run("solve", prob, "--method", "fb", "--step", "0.015", "--out", tmp_path / "fb", "--quiet")
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "fb" / "cells.vtu").is_file()
+    s = json.loads((tmp_path / "fb" / "summary.json").read_text())
+    assert sum(s["failures"].values()) == s["n_failed"]
     r = run("solve", prob, "--method", "forward", "--nd", "4", "--out", tmp_path / "fw", "--quiet")
     assert r.returncode == 0, r.stderr
     r = run("compare", tmp_path / "fw", tmp_path / "fb", "--plot", tmp_path / "cmp.png")
@@ -629,3 +631,18 @@ def test_every_cell_of_a_known_flat_workspace_is_reported():
     assert len(crossed) > 50
     assert crossed <= reported, f"missed {len(crossed - reported)} of {len(crossed)} cells"
     assert reported <= touched
+
+
+def test_failures_say_which_were_prefiltered_not_reached_or_failed():
+    from casadi_ws.status import Status
+    from casadi_ws.workspace.result import WorkspaceResult
+
+    codes = [Status.PREFILTERED] * 3 + [Status.NOT_REACHED, Status.GAVE_UP, Status.SOLVE_FAILED]
+    fb = WorkspaceResult("forward-backward", np.zeros((0, 3)), np.zeros((0, 2)), failed_u=np.zeros((6, 3)),
+                         failed_status=np.array(codes), failed_residual=np.zeros(6))
+    assert fb.failures() == {"prefiltered": 3, "not_reached": 2, "failed": 1}
+    assert fb.failures_line() == "3 prefiltered, 2 not reached, 1 failed"
+    fw = WorkspaceResult("forward", np.zeros((0, 3)), np.zeros((0, 2)), failed_u=np.zeros((2, 2)),
+                         failed_status=np.array([Status.MAX_ITERATIONS, Status.CONTINUATION_FAILED]),
+                         failed_residual=np.zeros(2))
+    assert fw.failures_line() == "2 failed" and fw.summary()["failures"]["failed"] == 2

@@ -24,7 +24,7 @@ def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
     if not quiet:
         s = result.summary()
         per_cell = s["counters"].get("factorizations_per_cell")
-        print(f"{result.method}: {s['n_points']} reachable points, {s['n_failed']} failed, {s['time_s']:.1f} s"
+        print(f"{result.method}: {s['n_points']} reachable points, {result.failures_line()}, {s['time_s']:.1f} s"
               + (f", {per_cell:.2f} LU factorisations per reached cell" if per_cell is not None else ""))
         extra = "".join(f" {f}" for f in ("cells.vtu", "boundary.vtu", "boundary.stl") if (out / f).exists())
         m = result.measures

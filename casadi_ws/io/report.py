@@ -81,8 +81,9 @@ def _table(result) -> str:
     s = result.summary()
     m = s.get("measures") or {}
     b = s.get("boundary") or {}
-    rows = [("method", s["method"]), ("reported points", s["n_points"]), ("failed", s["n_failed"]),
-            ("time", f"{s['time_s']:.1f} s")]
+    f = s.get("failures") or {"failed": s["n_failed"]}
+    rows = [("method", s["method"]), ("reported points", s["n_points"])] + [
+        (k.replace("_", " "), v) for k, v in f.items() if v or k == "failed"] + [("time", f"{s['time_s']:.1f} s")]
     if m.get("volume") is not None:
         err = m.get("volume_error")
         rows.append(("volume", f"{m['volume'] * 1e6:.4g} cm³" + (f" ± {err * 1e6:.2g}" if err else "")

@@ -6,7 +6,8 @@ residual below tolerance and u inside U), their inputs, optionally their nodal s
 
 Files written by :meth:`WorkspaceResult.save` into a directory:
 
-``summary.json``  method, n_points, n_failed, time_s, settings, counters, timings, problem description,
+``summary.json``  method, n_points, n_failed and ``failures`` (prefiltered / not_reached / failed: what the
+                  rows of failures.csv mean), time_s, settings, counters, timings, problem description,
                   measures (volume from the boundary surface, cell_volume, area, ...), the boundary's summary
 ``points.csv``    one row per reachable point: x, y, z (m), u1..un (N), stable, admissible (0/1), violations
                   (bit mask: ``summary.json``'s ``violation_bits``), then the maps (:mod:`.maps`): effort,
@@ -97,7 +98,25 @@ class WorkspaceResult:
 
     @property
     def n_failed(self) -> int:
+        """Every target or input with no reported point (:meth:`failures` says why)."""
         return int(self.failed_status.shape[0])
+
+    def failures(self) -> dict:
+        """The rows of failures.csv by what they mean: ``prefiltered`` (forward-backward: not solved, the
+        linearised closest point lies outside the target's cell: most are outside the workspace),
+        ``not_reached`` (solved: the verified closest point lies outside the cell, or the solve stopped for
+        that reason), ``failed`` (no verified equilibrium: what the warnings count)."""
+        codes = np.asarray(self.failed_status, dtype=int)
+        pre = int(np.count_nonzero(codes == Status.PREFILTERED))
+        missed = int(np.count_nonzero(np.isin(codes, (Status.NOT_REACHED, Status.GAVE_UP))))
+        return {"prefiltered": pre, "not_reached": missed, "failed": int(codes.size) - pre - missed}
+
+    def failures_line(self) -> str:
+        """``12 failed`` or, where some rows are not failures, ``226 prefiltered, 9 not reached, 2 failed``."""
+        f = self.failures()
+        if not f["prefiltered"] and not f["not_reached"]:
+            return f"{f['failed']} failed"
+        return f"{f['prefiltered']} prefiltered, {f['not_reached']} not reached, {f['failed']} failed"
 
     def warnings(self) -> list[str]:
         """Plain-language warnings about the run (e.g. many failed points)."""
@@ -131,6 +150,7 @@ class WorkspaceResult:
             "method": self.method,
             "n_points": self.n_points,
             "n_failed": self.n_failed,
+            "failures": self.failures(),
             "n_excluded": int(len(self.arrays.get("excluded_violations", []))),
             "excluded_by_check": self.counters.get("excluded", {}),
             "n_inadmissible_kept": int(np.count_nonzero(self._violations())),
