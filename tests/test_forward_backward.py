@@ -460,7 +460,8 @@ def test_cli_fb_and_compare(tmp_path):
     out = json.loads(r.stdout)
     keys = list(out)
     assert keys[:3] == ["cells_a_in_b", "cells_b_in_a", "points_a_in_b_cells"]  # strict measures first
-    assert {"coverage_within_one_cell", "precision_within_one_cell", "hausdorff", "volume_a", "volume_b"} <= set(out)
+    assert {"coverage_within_one_cell", "precision_within_one_cell", "hausdorff", "cell_volume_a", "cell_volume_b",
+            "volume_a", "volume_b"} <= set(out)
     assert (tmp_path / "cmp.png").is_file()
     r = run("solve", prob, "--method", "fb", "--step", "-1", "--out", tmp_path / "x")
     assert r.returncode == 2 and "--step" in r.stderr

@@ -31,5 +31,9 @@ def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
         if m.get("volume") is not None and m.get("volume_method") == "boundary":
             print(f"volume {m['volume'] * 1e6:.4g} cm^3 (boundary surface, +-{m['volume_error'] * 1e6:.2g}); "
                   f"the cells cover {m['cell_volume'] * 1e6:.4g} cm^3")
+        elif m.get("area") is not None:
+            print(f"area {m['area'] * 1e4:.4g} cm^2 (two inputs: the workspace is a surface)")
+        elif m.get("length") is not None:
+            print(f"length {m['length'] * 1e3:.4g} mm (one input: the workspace is a curve)")
         print(f"wrote {out}/: summary.json points.csv failures.csv result.npz points.vtu{extra} "
               f"{' '.join(scene)} (ParaView) three_views.png workspace_3d.png report.html")

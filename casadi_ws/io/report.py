@@ -87,12 +87,14 @@ def _table(result) -> str:
     if m.get("volume") is not None:
         err = m.get("volume_error")
         rows.append(("volume", f"{m['volume'] * 1e6:.4g} cm³" + (f" ± {err * 1e6:.2g}" if err else "")
-                     + f" ({m.get('volume_method', 'cells')})"))
+                     + " (boundary)"))
     if m.get("cell_volume") is not None:
         rows.append(("cells × s³", f"{m['cell_volume'] * 1e6:.4g} cm³ ({m['cells']} cells of "
                                    f"{m['cell_step'] * 1e3:.3g} mm)"))
     if m.get("area") is not None:
         rows.append(("area", f"{m['area'] * 1e4:.4g} cm²"))
+    if m.get("length") is not None:
+        rows.append(("length", f"{m['length'] * 1e3:.4g} mm"))
     if b:
         rows.append(("boundary", f"{b['method']}, {b['triangles']} triangles, closed: {b['closed']}, "
                                  f"tolerance {b['tolerance'] * 1e3:.3g} mm"))

@@ -389,7 +389,7 @@ def boundary(model, settings: BoundarySettings | None = None, executor=None, pro
         why = (f"{n_u} inputs with a range, C(n,2) 2^(n-2) = {len(two_faces(n_u)) if n_u <= 12 else 'too many'} "
                f"faces" if n_u > MAX_INPUTS else "fewer than two inputs with a range")
         return Boundary(np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros((0, model.n_u)), "none",
-                        notes=[f"no boundary surface ({why}); the volume is the cells'"])
+                        notes=[f"no boundary surface ({why}): no volume (cell_volume counts the cells)"])
     nodes = _Nodes(model, executor, problem, known, seeds.of() if seeds is not None else {})
     known_keys = set(nodes.tip)
     b = _surface(nodes, n)
@@ -557,7 +557,7 @@ def _closed_surface(V, U, face_tris, vmask, notes, tol) -> Boundary:
     if not (_closed(Tf2) and _closed(Tc2)):
         return Boundary(V2, Tf2, U2, "none", closed=False, area=_area(V2, Tf2), violations=vm,
                         notes=notes + ["the faces of U that bound the workspace do not close: no volume from "
-                                       "the surface; the volume is the cells'"])
+                                       "the surface: no volume (cell_volume counts the cells)"])
     vol, vol_c = _signed_volume(V2, Tf2), _signed_volume(V2, Tc2)
     return Boundary(V2, Tf2, U2, "input-faces", closed=True, volume=vol, volume_error=abs(vol - vol_c),
                     area=_area(V2, Tf2), tolerance=tol, violations=vm, notes=notes)

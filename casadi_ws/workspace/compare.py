@@ -18,8 +18,13 @@ Lenient, labelled as such (they forgive a miss next to a hit, and so hide the ce
                                distance <= 1)
 ``precision_within_one_cell``  the same with the roles swapped
 
-Also ``hausdorff`` (symmetric, metres, between the point clouds) and ``volume_a``/``volume_b`` (cells x s^3,
-m^3; for a 2-actuator robot the workspace is a surface, and this is its area times one cell of thickness).
+Also ``hausdorff`` (symmetric, metres, between the point clouds); ``cell_volume_a``/``cell_volume_b`` (cells x
+s^3, m^3: what the cells cover, not a volume of the workspace; for a 2-actuator robot the workspace is a
+surface, and this is its area times one cell of thickness); and where a result has a closed boundary surface
+(:mod:`.boundary`) its enclosed ``volume_a``/``volume_b`` (else None), and where both have one
+``volume_symmetric_difference``: the volume inside exactly one of the two surfaces (m^3), counted on a grid of
+:data:`SAMPLES` points a side over their common bounding box (error about the surfaces' area times the grid's
+spacing, ``volume_symmetric_difference_spacing``).
 """
 
 from __future__ import annotations
@@ -30,6 +35,9 @@ import numpy as np
 from scipy.spatial.distance import directed_hausdorff
 
 __all__ = ["cell_set", "compare"]
+
+SAMPLES = 64
+"""Grid points per side on which the volume inside exactly one of two boundary surfaces is counted."""
 
 _RING = np.array(list(itertools.product((-1, 0, 1), repeat=3)), dtype=np.int64)
 
@@ -79,10 +87,37 @@ def compare(a, b, step: float | None = None) -> dict:
         "coverage_within_one_cell": float(_near(a.points, cb, origin, step).mean()),
         "precision_within_one_cell": float(_near(b.points, ca, origin, step).mean()),
         "hausdorff": float(h),
-        "volume_a": len(ca) * step**3,
-        "volume_b": len(cb) * step**3,
+        "cell_volume_a": len(ca) * step**3,
+        "cell_volume_b": len(cb) * step**3,
+        **_volumes(a, b),
         "n_points_a": a.n_points,
         "n_points_b": b.n_points,
         "step": step,
         "methods": [a.method, b.method],
     }
+
+
+def _closed(r):
+    b = getattr(r, "boundary", None)
+    return b if b is not None and b.method == "input-faces" and b.closed else None
+
+
+def _volumes(a, b) -> dict:
+    """The boundary volumes of two results and the volume inside exactly one of their surfaces (see the
+    module)."""
+    from ..fem.surface import signed_distance
+
+    ba, bb = _closed(a), _closed(b)
+    out = {"volume_a": abs(ba.volume) if ba else None, "volume_b": abs(bb.volume) if bb else None}
+    if ba is None or bb is None:
+        return out
+    lo = np.minimum(ba.vertices.min(0), bb.vertices.min(0))
+    hi = np.maximum(ba.vertices.max(0), bb.vertices.max(0))
+    h = (hi - lo) / SAMPLES
+    axes = [lo[i] + h[i] * (np.arange(SAMPLES) + 0.5) for i in range(3)]
+    P = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    inside_a = signed_distance(ba.vertices, ba.triangles, P) < 0
+    inside_b = signed_distance(bb.vertices, bb.triangles, P) < 0
+    out["volume_symmetric_difference"] = float(np.count_nonzero(inside_a != inside_b) * np.prod(h))
+    out["volume_symmetric_difference_spacing"] = float(h.max())
+    return out

@@ -6,16 +6,18 @@ through ``origin``):
 
 ``volume``              the volume enclosed by the boundary surface (:mod:`casadi_ws.workspace.boundary`),
                         m^3, with ``volume_error`` (its difference from the surface through every other
-                        node) and ``volume_method`` (``boundary``); where there is no closed surface (2
-                        inputs: 0, the workspace is a surface; 6+ inputs, or faces that do not close), the
-                        cells' volume, ``volume_method: cells``, which overestimates by a layer of boundary
-                        cells (first order in s: ~2.5x on the 3-cable trunk at 4 mm).
+                        node) and ``volume_method`` (``boundary``); None where there is no closed surface
+                        (1 or 2 inputs: a curve or a surface has no volume; 6+ inputs, or faces that do not
+                        close): never a count of cells (``cell_volume`` is that).
 ``cells``, ``cell_volume``  number of cells, and cells x s^3 (m^3): what the cells cover, not the robot's
-                        volume.
-``area``                two actuators only: the area of the surface u -> p(u), m^2, summed over the
-                        triangles of a Delaunay triangulation of the points' inputs u (scaled to the unit
-                        square), mapped to their tips; triangles spanning more than 3 cells (across a hole
-                        where solves failed) are left out.
+                        volume (it overestimates by a layer of boundary cells, first order in s: ~2.5x on
+                        the 3-cable trunk at 4 mm).
+``area``                two inputs with a range: the area of the surface u -> p(u), m^2: the boundary's
+                        patch where it was built, else summed over the triangles of a Delaunay triangulation
+                        of the points' inputs u (scaled to the unit square), mapped to their tips; triangles
+                        spanning more than 3 cells (across a hole where solves failed) are left out.
+``length``              one input with a range: the length of the curve u -> p(u), m, through the points in
+                        the order of u (a step longer than 3 cells, across a gap, is left out).
 ``extents``             the bounding box of the points, [[xmin, ymin, zmin], [xmax, ymax, zmax]] (m).
 ``task_share``          with a task: the share of the task's cells that the workspace reaches (a task box:
                         the grid cells whose centre lies in the box; task points: the cells holding them),
@@ -103,23 +105,35 @@ def surface_area(points, u, lower, upper, max_edge: float) -> float:
     return float(a[keep].sum())
 
 
+def curve_length(points, u, max_step: float) -> float:
+    """Length of the tip curve over one input: the points in the order of u, steps longer than ``max_step``
+    (across a gap where solves failed) left out."""
+    P = np.asarray(points)[np.argsort(u, kind="stable")]
+    d = np.linalg.norm(np.diff(P, axis=0), axis=1)
+    return float(d[d <= max_step].sum())
+
+
 def measures(result, step: float | None = None, task: Task | None = None, origin=None) -> dict:
     """The measures of the module's docstring, as plain data (SI units)."""
     origin, step = _grid(result, step, origin)
     cells = cell_set(result, origin, step) if result.n_points else set()
     out = {"cells": len(cells), "cell_step": step, "cell_volume": len(cells) * step**3,
-           "volume": len(cells) * step**3, "volume_error": None, "volume_method": "cells",
+           "volume": None, "volume_error": None, "volume_method": None,
            "extents": ([result.points.min(0).tolist(), result.points.max(0).tolist()] if result.n_points else None)}
     u = np.asarray(result.u)
     b = getattr(result, "boundary", None)
     if b is not None and b.method == "input-faces":
         out.update(volume=abs(b.volume), volume_error=b.volume_error, volume_method="boundary",
                    boundary_area=b.area)
-    if u.ndim == 2 and u.shape[1] == 2 and result.n_points:
+    if u.ndim == 2 and result.n_points:
         lo, hi = np.asarray(result.problem.get("u_min", u.min(0))), np.asarray(result.problem.get("u_max", u.max(0)))
-        out["area"] = surface_area(result.points, u, lo, hi, 3 * step)
-        if b is not None and b.method == "input-patch":
-            out.update(area=b.area, volume=0.0, volume_error=0.0, volume_method="surface (2 inputs)")
+        free = np.flatnonzero(hi > lo) if lo.shape == (u.shape[1],) else np.arange(u.shape[1])
+        if free.size == 2:
+            out["area"] = surface_area(result.points, u[:, free], lo[free], hi[free], 3 * step)
+            if b is not None and b.method == "input-patch":
+                out["area"] = b.area
+        elif free.size == 1:
+            out["length"] = curve_length(result.points, u[:, free[0]], 3 * step)
     if task is not None:
         want = task.cells(origin, step)
         out["task"] = task.describe()
