@@ -448,8 +448,11 @@ def test_unreachable_target_is_not_reached():
 def test_cli_fb_and_compare(tmp_path):
     prob = coarse_problem_file(tmp_path)
     run = run_cli
-    r = run("solve", prob, "--method", "fb", "--step", "0.015", "--out", tmp_path / "fb", "--quiet")
+    r = run("solve", prob, "--method", "fb", "--step", "0.015", "--out", tmp_path / "fb")
     assert r.returncode == 0, r.stderr
+    iterations = [line for line in r.stderr.splitlines() if line.startswith("forward-backward: iteration")]
+    assert iterations and all(" s" in line and "reached" in line for line in iterations)
+    assert any("cells/s); next: " in line and "at this rate" in line for line in iterations[:-1] or iterations)
     assert (tmp_path / "fb" / "cells.vtu").is_file()
     s = json.loads((tmp_path / "fb" / "summary.json").read_text())
     assert sum(s["failures"].values()) == s["n_failed"]

@@ -380,6 +380,8 @@ class Exploration:
                              inadmissible=0, path_dependent=0, excluded={n: 0 for n in VIOLATIONS},
                              stopped_at_max_cells=False)
         self.timings = {"step1_interval": 0.0, "step2_neighbourhood": 0.0, "step3_backward": 0.0}
+        # when the last iteration ended, the cells reached by then, the cells it left to expand
+        self._clock = (time.perf_counter(), 1, 1)
         self.bsettings = settings.backward
         if self.bsettings.give_up is None and self.bsettings.formulation == "reduced":
             self.bsettings = replace(self.bsettings, give_up=0.05)  # see BackwardSettings.give_up
@@ -563,8 +565,21 @@ class Exploration:
                     c.q = None
         self.save()
         if self.settings.progress:
-            print(f"forward-backward: iteration {self.counters['iterations']}: {len(self.frontier)} new cells, "
-                  f"{len(self.reached)} reached, {self.counters['explored']} explored", file=sys.stderr)
+            print(self.progress_line(), file=sys.stderr)
+
+    def progress_line(self) -> str:
+        """One line per iteration: cells reached and explored, the iteration's time and rate, and what the next
+        iteration will take at that rate (the flood fill's total is not known before it ends: a workspace
+        is as large as it turns out to be)."""
+        now, (t0, reached0, expanded) = time.perf_counter(), self._clock
+        dt, gained = now - t0, len(self.reached) - reached0
+        self._clock = (now, len(self.reached), max(len(self.frontier), 1))
+        line = (f"forward-backward: iteration {self.counters['iterations']}: {len(self.frontier)} new cells, "
+                f"{len(self.reached)} reached, {self.counters['explored']} explored; {dt:.1f} s")
+        if gained > 0 and self.frontier:
+            line += (f" ({gained / dt:.3g} cells/s); next: {len(self.frontier)} cells to expand, ~"
+                     f"{dt * len(self.frontier) / expanded:.0f} s at this rate")
+        return line
 
     # ------------------------------------------------------------------ checkpoints and the result
     def save(self) -> None:
