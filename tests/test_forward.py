@@ -329,3 +329,14 @@ def test_an_input_held_at_one_value_is_no_axis_of_the_grid():
         for u, p in zip(held.u, held.points):
             (k,) = np.flatnonzero(np.all(full.u == u, axis=1))
             assert np.abs(full.points[k] - p).max() < 1e-8
+
+
+def test_the_3d_picture_has_round_ticks_spanning_the_data():
+    from casadi_ws.io.plots import _nice_axis
+
+    for lo, hi in ((-13.0, 60.87), (0.0, 195.0), (0.31, 0.38), (5.0, 5.0)):
+        a, b, n = _nice_axis(lo, hi)
+        step = (b - a) / (n - 1)
+        assert a <= lo and b >= hi and 3 <= n <= 7
+        assert any(np.isclose(step / 10.0 ** np.floor(np.log10(step)), k) for k in (1, 2, 2.5, 5))
+        assert np.isclose(a / step, round(a / step))  # ticks on multiples of the step: 0, 50, 100

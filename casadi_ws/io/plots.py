@@ -97,24 +97,55 @@ def _render_pyvista(results, path, mesh, title):
     import pyvista as pv
 
     pl = pv.Plotter(off_screen=True, window_size=(1200, 900))
+    extent = []
     if mesh is not None:
         grid = pv.UnstructuredGrid({pv.CellType.TETRA: mesh.corners}, mesh.nodes * 1e3)
         pl.add_mesh(grid.extract_surface(algorithm="dataset_surface"), color="lightgray", opacity=0.35, show_edges=False)
+        extent.append(mesh.nodes * 1e3)
+    keys = []  # a text key: pyvista's legend box clips long labels
     for i, r in enumerate(results):
         st = _style(r, i)
         if r.n_points:
             pl.add_points(r.points * 1e3, color=st["color"], point_size=st["size"] + 2,
                           render_points_as_spheres=True)
-        # a text key: pyvista's legend box clips long labels
-        pl.add_text(f"{st['label']}: {r.n_points} points", position=(20, 20 + 28 * i), font_size=10,
-                    color=st["color"])
-    pl.show_grid(xtitle="x (mm)", ytitle="y (mm)", ztitle="z (mm)")
+            extent.append(r.points * 1e3)
+        keys.append((f"{st['label']}: {r.n_points} points", st["color"]))
+        b = getattr(r, "boundary", None)
+        if b is not None and len(b.triangles):
+            faces = np.hstack([np.full((len(b.triangles), 1), 3), b.triangles]).ravel()
+            pl.add_mesh(pv.PolyData(b.vertices * 1e3, faces), color=st["color"], opacity=0.25, show_edges=False)
+            keys.append((f"{st['label']}: " + ("the workspace surface (2 inputs)" if b.method == "input-patch"
+                                               else "boundary surface"), st["color"]))
+    rest = results[0].rest_tip if results else None
+    if rest is not None and np.all(np.isfinite(rest)):
+        pl.add_points(np.asarray(rest, float)[None] * 1e3, color="black", point_size=14, render_points_as_spheres=True)
+        keys.append(("black: the tip at rest", "black"))
+        extent.append(np.asarray(rest, float)[None] * 1e3)
+    for i, (text, color) in enumerate(keys):
+        pl.add_text(text, position=(20, 20 + 28 * i), font_size=10, color=color)
+    P = np.vstack(extent) if extent else np.zeros((1, 3))
+    axes = [_nice_axis(lo, hi) for lo, hi in zip(P.min(0), P.max(0))]
+    pl.show_grid(xtitle="x (mm)", ytitle="y (mm)", ztitle="z (mm)", fmt="%g",
+                 bounds=[v for a in axes for v in a[:2]], n_xlabels=axes[0][2], n_ylabels=axes[1][2],
+                 n_zlabels=axes[2][2])
     pl.add_text(title or "Workspace (mm)", font_size=10, position="upper_left")
     pl.camera_position = "iso"
     pl.camera.zoom(0.8)
     pl.screenshot(str(path))
     pl.close()
     return Path(path)
+
+
+def _nice_axis(lo: float, hi: float) -> tuple[float, float, int]:
+    """(first tick, last tick, number of ticks) of round ticks (1, 2, 2.5 or 5 times a power of ten) spanning
+    [lo, hi]: the axes' labels then read 0, 50, 100, not 13.0, 5.3, 23.6."""
+    from matplotlib.ticker import MaxNLocator
+
+    if not hi > lo:
+        lo, hi = lo - 1.0, hi + 1.0
+    t = MaxNLocator(nbins=5, steps=[1, 2, 2.5, 5, 10]).tick_values(lo, hi)
+    t = t[(t >= lo - (t[1] - t[0])) & (t <= hi + (t[1] - t[0]))]
+    return float(t[0]), float(t[-1]), int(len(t))
 
 
 def _render_matplotlib(results, path, mesh, title):
