@@ -1,19 +1,26 @@
-# The README's two set-up commands: `make demo` and `make test`. Both create .venv if missing and install
-# (with the `fast` extra: PARDISO, which the tests cover beside SuperLU).
+# The README's two set-up commands: `make demo` and `make test`. Both create .venv if missing; `make demo`
+# installs the package alone, `make test` adds the test tools and the `fast` extra (README: their sizes).
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+BASE   := $(VENV)/.installed-base
 
 .PHONY: demo test paper clean
 
-$(STAMP): pyproject.toml
+# the package alone: what the demo needs (SuperLU; no test tools, no MKL)
+$(BASE): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e .
+	touch $(BASE)
+
+# with the test tools and the `fast` extra (PARDISO, which the tests cover beside SuperLU)
+$(STAMP): pyproject.toml $(BASE)
 	$(BIN)/python -m pip install -q -e '.[test,fast]'
 	touch $(STAMP)
 
-demo: $(STAMP)
+demo: $(BASE)
 	$(BIN)/casadi-ws demo
 
 # the report's browser test needs a chromium: Debian's package, installed once if missing (as root)
