@@ -1,6 +1,7 @@
 """Command line: ``casadi-ws equilibrium|solve|compare|reach|follow|study|demo ...``.
 
-Exit codes: 0 success, 1 a solve did not converge (equilibrium), 2 bad input (problem file, arguments).
+Exit codes: 0 success, 1 the equilibrium did not converge or is not admissible (equilibrium), 2 bad input (problem
+file, arguments).
 Bad input prints one line naming the file and key; ``--debug`` shows the Python traceback instead.
 """
 
@@ -203,20 +204,27 @@ def cmd_solve(args) -> int:
         if executor is not None:
             executor.close()
     from .io.output import write_outputs
-    from .workspace.measures import measures
 
     try:
-        if result.method == "forward" and not args.no_boundary:
-            from .workspace.boundary import boundary_of
-
-            result.boundary = boundary_of(result, problem)
-        result.measures = measures(result, step=args.step, task=task)
+        _measure(result, problem, not args.no_boundary, args.step, task)
         write_outputs(result, problem, out, args.quiet)
     except KeyboardInterrupt:  # after the run: its result files may be incomplete
         print(f"casadi-ws: interrupted while writing the results into {out}; some files may be missing: run the "
               f"same command with --overwrite to compute them again", file=sys.stderr)
         return 130
     return 0
+
+
+def _measure(result, problem, with_boundary: bool, step=None, task=None) -> None:
+    """A finished run's boundary (a forward grid's from its own nodes; forward-backward built its own) and
+    measures, as ``solve`` and ``demo`` report them."""
+    from .workspace.measures import measures
+
+    if result.method == "forward" and with_boundary:
+        from .workspace.boundary import boundary_of
+
+        result.boundary = boundary_of(result, problem)
+    result.measures = measures(result, step=step, task=task)
 
 
 def _result_dir(d) -> Path:
@@ -227,7 +235,11 @@ def _result_dir(d) -> Path:
 
 def _problem_of(result, given):
     """The problem a result was computed from: --problem, else the file named in its summary."""
+    from .io.problem import BUILT_IN, default_problem
+
     src = given or result.problem.get("source")
+    if not given and src == BUILT_IN:
+        return default_problem()
     if not src or not Path(src).is_file():
         raise UsageError(f"--problem: the result's problem file {src!r} is not found; give it with --problem")
     return _load(src)
@@ -248,8 +260,9 @@ def cmd_boundary(args) -> int:
     result.measures = measures(result, task=None) | {k: v for k, v in result.measures.items() if k.startswith("task")}
     write_outputs(result, problem, d, quiet=True)
     b = result.boundary.summary()
-    print(json.dumps({"boundary": b, "volume": result.measures["volume"],
-                      "volume_method": result.measures["volume_method"]}, indent=2, default=float))
+    m = result.measures
+    print(json.dumps({"boundary": b, "volume": m["volume"], "volume_method": m["volume_method"],
+                      **{k: m[k] for k in ("area", "length") if k in m}}, indent=2, default=float))
     return 0
 
 
@@ -438,6 +451,7 @@ def cmd_demo(args) -> int:
           f"{problem.mesh.n_tets} tetrahedra, {problem.material.model}, {problem.n_u} cables, "
           f"U = [0, 100] N x [0, 100] N, {args.nd} values per cable)")
     result = forward(problem, settings=ForwardSettings(n_d=args.nd, progress=True))
+    _measure(result, problem, with_boundary=True)
     write_outputs(result, problem, _prepare_out(args.out, True)[0], quiet=False)
     return 0
 

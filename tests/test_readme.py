@@ -179,3 +179,13 @@ def test_the_readme_python_script_runs_as_written(tmp_path):
     r = subprocess.run([sys.executable, "script.py"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     assert "coverage" in r.stdout and (tmp_path / "results" / "fb" / "summary.json").exists()
+
+
+def test_the_readmes_counts_of_bad_input_files_are_the_corpus():
+    import re
+
+    text = " ".join((REPO / "README.md").read_text().split())
+    m = re.search(r"`tests/bad_inputs/` holds (\d+) such problem files and `tests/bad_inputs/studies/` (\d+) study", text)
+    assert m, "the README's sentence on the bad-input corpus moved: update this test"
+    assert int(m.group(1)) == len(list((REPO / "tests" / "bad_inputs").glob("*.yaml")))
+    assert int(m.group(2)) == len(list((REPO / "tests" / "bad_inputs" / "studies").glob("*.yaml")))

@@ -174,8 +174,9 @@ def available(name: str) -> bool:
 
 
 def choose(name: str) -> str:
-    """What ``name`` means in this installation: ``auto`` stays ``auto`` (per matrix: PARDISO for a symmetric
-    K, SuperLU for an unsymmetric one) where PARDISO is installed, and is ``superlu`` where it is not."""
+    """What ``name`` means in this installation: ``auto`` stays ``auto`` (per matrix, as the module's table says:
+    PARDISO for a symmetric K and for Newton's LU of an unsymmetric one, SuperLU for an unsymmetric K whose
+    inertia is asked for) where PARDISO is installed, and is ``superlu`` where it is not."""
     if name == "auto" and not available("pardiso"):
         return "superlu"
     return name
