@@ -68,7 +68,8 @@ _KINDS = (
     ("visual only", ("Ogl", "Visual", "Light", "Camera", "BackgroundSetting", "SceneFrame")),
     ("changes the topology during a simulation (the mesh is kept as loaded)", ("TopologyModifier",
                                                                                "TopologicalMapping")),
-    ("collision and contact (not modelled yet)", ("Collision", "Contact", "Pipeline", "Intersection",
+    ("collision detection (casadi-ws's contact is the problem's obstacles and self_contact, translated from the "
+     "scene's fixed objects and self-collision where it says so)", ("Collision", "Contact", "Pipeline", "Intersection",
                                                   "BroadPhase", "NarrowPhase", "BruteForce", "MinDistance",
                                                   "Proximity")),
 )
