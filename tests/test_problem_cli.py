@@ -109,3 +109,14 @@ def test_version_is_the_packages_and_help_names_each_inputs_unit():
     assert r.returncode == 0 and r.stdout.strip() == f"casadi-ws {__version__}"
     r = run_cli("equilibrium", "--help")
     assert all(w in " ".join(r.stdout.split()) for w in ("tension in N", "shortening in m", "pressure in Pa"))
+
+
+def test_the_demo_reports_measures_and_boundary_and_its_result_takes_the_boundary_command(tmp_path):
+    r = run_cli("demo", "--nd", "3", "--out", tmp_path / "demo")
+    assert r.returncode == 0, r.stderr
+    s = json.loads((tmp_path / "demo" / "summary.json").read_text())
+    assert s["measures"]["area"] > 0 and s["measures"]["volume"] is None  # two inputs: a surface
+    assert s["boundary"]["method"] == "input-patch"
+    r = run_cli("boundary", tmp_path / "demo", "--n", "3")  # the built-in problem is found again
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["area"] > 0

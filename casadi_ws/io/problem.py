@@ -1058,6 +1058,10 @@ def load_problem(path: str | Path) -> Problem:
     return problem_from_dict(read_yaml(path), str(path), path.parent)
 
 
+BUILT_IN = "<built-in trunk_2cables>"
+"""The source a result of the built-in problem names (``casadi-ws demo``): commands that read a result's problem
+build it again from :data:`DEFAULT_PROBLEM`."""
+
 DEFAULT_PROBLEM = {
     "name": "trunk_2cables",
     "description": "Trunk-like robot with two long cables 90 degrees apart (paper, Section 6.1).",
@@ -1076,4 +1080,4 @@ DEFAULT_PROBLEM = {
 
 def default_problem() -> Problem:
     """The built-in default problem: the 2-cable trunk of the paper (same as problems/trunk_2cables.yaml)."""
-    return problem_from_dict(DEFAULT_PROBLEM, "<built-in trunk_2cables>")
+    return problem_from_dict(DEFAULT_PROBLEM, BUILT_IN)
