@@ -286,14 +286,29 @@ def test_report_renders_in_headless_chromium(fb_dir, tmp_path):
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=exe, args=["--use-angle=swiftshader",
                                                                "--enable-unsafe-swiftshader", "--no-sandbox"])
-        page = browser.new_page(viewport={"width": 1400, "height": 800})
-        page.goto(page_file.as_uri())
-        page.wait_for_selector("#workspace .gl-container canvas", timeout=60000)
-        page.wait_for_timeout(1000)
-        assert page.locator("#summary tr").count() >= 5
-        assert "volume" in page.locator("#summary").inner_text()
-        shot = tmp_path / "shot.png"
-        page.locator("#workspace").screenshot(path=str(shot))
+        for width, height in ((1280, 720), (1920, 1080)):
+            page = browser.new_page(viewport={"width": width, "height": height})
+            page.goto(page_file.as_uri())
+            page.wait_for_selector("#workspace .gl-container canvas", timeout=60000)
+            page.wait_for_timeout(1000)
+            assert page.locator("#summary tr").count() >= 5
+            assert "volume" in page.locator("#summary").inner_text()
+            # the summary is in view and nothing of the plot lies over it (plotly once laid itself out at the
+            # window's full width, over the summary, until the window was resized)
+            table = page.locator("#summary").bounding_box()
+            assert table["x"] + table["width"] <= width and table["y"] + table["height"] <= height
+            for svg in page.locator("#workspace .main-svg").all():
+                box = svg.bounding_box()
+                assert box["x"] + box["width"] <= table["x"] or box["y"] >= table["y"] + table["height"]
+            # the colour bar and the menu name their quantity's unit; inputs go by the actuator's name
+            title = page.locator("#workspace .cbtitle").all_text_contents()
+            assert title and "(" in title[0] and title[0].endswith(")")
+            menu = " ".join(page.locator("#workspace .updatemenu-item-text").all_text_contents())
+            assert "mm/N" in menu or "compliance" not in menu
+            if width == 1280:
+                shot = tmp_path / "shot.png"
+                page.locator("#workspace").screenshot(path=str(shot))
+            page.close()
         browser.close()
     img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
     # the WebGL scene drew the robot, the surface and the points: many colours, much non-white

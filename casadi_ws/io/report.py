@@ -19,7 +19,29 @@ from ..workspace.result import _json_default
 
 __all__ = ["write_report"]
 
-_UNITS = {"effort": "", "steerability": "m per input unit", "compliance": "m/N", "tilt": "deg", "contact": "N"}
+_UNITS = {"effort": "fraction of the input range", "steerability": "mm per input unit", "compliance": "mm/N",
+          "tilt": "deg", "contact": "N"}
+_SCALE = {"steerability": 1e3, "compliance": 1e3}  # m -> mm, as the axes
+MM = 1e3
+
+
+def _up(result) -> dict:
+    """The view's up axis: against gravity where the problem has it (the SOFA finger hangs along -y), else +z."""
+    g = np.asarray(result.problem.get("gravity") or [0.0, 0.0, 0.0], float)
+    if not np.any(g):
+        return dict(x=0, y=0, z=1)
+    k = int(np.argmax(np.abs(g)))
+    up = np.zeros(3)
+    up[k] = -np.sign(g[k])
+    return dict(x=up[0], y=up[1], z=up[2])
+
+
+def _inputs(result) -> list[tuple[str, str]]:
+    """(label, unit) of each input: the actuator's name and its unit."""
+    acts = result.problem.get("actuators") or []
+    n = result.u.shape[1] if result.u.ndim == 2 else 0
+    return [(acts[i].get("name", f"u{i + 1}") if i < len(acts) else f"u{i + 1}",
+             acts[i].get("unit", "") if i < len(acts) else "") for i in range(n)]
 
 
 def _figure(result, mesh, obstacles=()):
@@ -34,47 +56,59 @@ def _figure(result, mesh, obstacles=()):
         lo, hi = X.min(axis=0), X.max(axis=0)
         for ob in obstacles:
             V, T = obstacle_surface(ob, lo - 0.25 * (hi - lo), hi + 0.25 * (hi - lo))
+            V = V * MM
             traces.append(go.Mesh3d(x=V[:, 0], y=V[:, 1], z=V[:, 2], i=T[:, 0], j=T[:, 1], k=T[:, 2],
                                     color="sienna", opacity=0.4, name=f"obstacle {ob.name}", showlegend=True,
                                     hoverinfo="skip"))
     if mesh is not None:
-        X, T = np.asarray(mesh.nodes, float), boundary_faces(mesh)[:, :3]
+        X, T = np.asarray(mesh.nodes, float) * MM, boundary_faces(mesh)[:, :3]
         traces.append(go.Mesh3d(x=X[:, 0], y=X[:, 1], z=X[:, 2], i=T[:, 0], j=T[:, 1], k=T[:, 2],
                                 color="lightgray", opacity=0.35, name="robot at rest", showlegend=True,
                                 hoverinfo="skip"))
     b = result.boundary
     if b is not None and len(b.triangles):
-        V, T = b.vertices, b.triangles
+        V, T = b.vertices * MM, b.triangles
         traces.append(go.Mesh3d(x=V[:, 0], y=V[:, 1], z=V[:, 2], i=T[:, 0], j=T[:, 1], k=T[:, 2],
                                 color="steelblue", opacity=0.3, name="workspace boundary", showlegend=True,
                                 flatshading=True, hoverinfo="skip"))
     maps = result.maps()
-    options = {name: maps[name] for name in ("effort", "steerability", "compliance", "tilt", "contact")
-               if np.any(np.isfinite(maps[name])) and (name != "contact" or len(obstacles))}
-    for i in range(result.u.shape[1] if result.u.ndim == 2 else 0):
-        options[f"u{i + 1}"] = result.u[:, i]
+    options = {}  # label with its unit -> values
+    for name in ("effort", "steerability", "compliance", "tilt", "contact"):
+        if np.any(np.isfinite(maps[name])) and (name != "contact" or len(obstacles)):
+            options[f"{name} ({_UNITS[name]})"] = np.asarray(maps[name], float) * _SCALE.get(name, 1.0)
+    for i, (label, unit) in enumerate(_inputs(result)):
+        options[f"{label} ({unit or 'input'})"] = result.u[:, i]
     names = list(options) or ["none"]
     first = options.get(names[0], np.zeros(result.n_points))
-    P = result.points
+    P = result.points * MM
     traces.append(go.Scatter3d(x=P[:, 0], y=P[:, 1], z=P[:, 2], mode="markers", name="reached points",
                                marker=dict(size=3, color=first, colorscale="Viridis", showscale=True,
-                                           colorbar=dict(title=names[0])),
-                               text=[f"{names[0]}: {v:.4g}" for v in first], hoverinfo="text+x+y+z"))
+                                           colorbar=dict(title=dict(text=names[0], side="right"))),
+                               text=[f"{names[0]}: {v:.4g}" for v in first],
+                               hovertemplate="%{text}<br>x %{x:.2f} mm, y %{y:.2f} mm, z %{z:.2f} mm<extra></extra>"))
     fig = go.Figure(traces)
     k = len(traces) - 1
-    buttons = [dict(label=f"{name} ({_UNITS.get(name, 'input')})".replace(" ()", ""), method="restyle",
+    buttons = [dict(label=name, method="restyle",
                     args=[{"marker.color": [options[name]], "marker.colorbar.title.text": name,
                            "text": [[f"{name}: {v:.4g}" for v in options[name]]]}, [k]])
                for name in options]
     fig.update_layout(
-        scene=dict(aspectmode="data", xaxis_title="x (m)", yaxis_title="y (m)", zaxis_title="z (m)",
-                   camera=dict(eye=dict(x=2.2, y=-2.2, z=1.4))),
+        scene=dict(aspectmode="data", xaxis_title="x (mm)", yaxis_title="y (mm)", zaxis_title="z (mm)",
+                   camera=dict(up=_up(result), eye=_eye(_up(result)))),
         margin=dict(l=0, r=0, t=40, b=0), height=720, legend=dict(x=0, y=0, yanchor="bottom"),
         title=f"{result.problem.get('name', '')}: {result.method} workspace (colour: menu at the top left; "
               f"click a legend entry to hide it)",
         updatemenus=[dict(buttons=buttons, x=0.0, y=1.0, xanchor="left", yanchor="top", showactive=True)]
         if buttons else [])
     return fig
+
+
+def _eye(up: dict) -> dict:
+    """A view from above and to the side, with ``up`` up."""
+    u = np.array([up["x"], up["y"], up["z"]], float)
+    side = np.array([2.2, -2.2, 2.2]) * (1 - np.abs(u))
+    e = side + 1.4 * u
+    return dict(x=e[0], y=e[1], z=e[2])
 
 
 def _table(result) -> str:
@@ -118,16 +152,19 @@ def write_report(result, path: str | Path, mesh=None, obstacles=()) -> Path:
                        config={"displaylogo": False, "responsive": True})
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>casadi-ws: {html.escape(result.problem.get('name', ''))}</title>
-<style>body{{font-family:sans-serif;margin:0;display:flex;flex-wrap:wrap}} #view{{flex:3 1 640px}}
-#side{{flex:1 1 320px;padding:1em}} th{{text-align:left;padding-right:1em;vertical-align:top}}
+<style>body{{font-family:sans-serif;margin:0;display:flex;flex-wrap:wrap}}
+#view{{flex:1 1 600px;min-width:0;max-width:100%}} #view .js-plotly-plot{{width:100%}}
+#side{{flex:0 0 340px;order:2;padding:1em;box-sizing:border-box;overflow-wrap:anywhere}}
+th{{text-align:left;padding-right:1em;vertical-align:top}}
 td{{font-variant-numeric:tabular-nums}}</style></head>
-<body><div id="view">{plot}</div><div id="side"><h2>Summary</h2>{_table(result)}
+<body><div id="side"><h2>Summary</h2>{_table(result)}
 <p>Colour: choose a map in the menu above the view. Maps: effort (RMS input fraction), steerability
-(smallest singular value of dp/du), compliance (largest eigenvalue of C K⁻¹ Cᵀ, m/N), tilt (deg), contact
-(the force the obstacles exert on the body, N; with obstacles).
+(smallest singular value of dp/du, mm per input unit), compliance (largest eigenvalue of C K⁻¹ Cᵀ, mm/N), tilt
+(deg), contact (the force the obstacles exert on the body, N; with obstacles), and each input by its
+actuator's name and unit. Coordinates in mm; the view's up is against gravity.
 Drag to rotate, scroll to zoom.</p>
 <script type="application/json" id="summary-json">{html.escape(json.dumps(result.summary(), default=_json_default))}</script>
-</div></body></html>
+</div><div id="view">{plot}</div></body></html>
 """
     path.write_text(page, encoding="utf-8")
     return path

@@ -330,4 +330,5 @@ def describe(problem, model) -> dict:
         "end_effector": np.asarray(problem.end_effector).tolist(), "tolerance": problem.solver.tolerance,
         "admissibility": asdict(problem.admissibility), "default_step": default_step(model),
         "obstacles": [{"name": o.name, "kind": o.kind} for o in problem.obstacles],
+        "gravity": np.asarray(getattr(problem, "gravity", np.zeros(3)), float).tolist(),
     }
