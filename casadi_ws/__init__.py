@@ -12,6 +12,7 @@ from .fem import (TET4, ElementType, Material, Mesh, MeshError, StaticModel, box
                   residual_function, trunk_mesh)
 from .fem.terms import Term
 from .io import Problem, ProblemError, SolverSettings, default_problem, load_problem, problem_from_dict
+from .io.output import write_outputs
 from .runtime import DaskExecutor, Executor, ProcessExecutor, SerialExecutor
 from .nlp import EquilibriumNLP, NLPSolution, tracking
 from .solvers import Equilibrium, equilibrium_function, quasi_static, solve_equilibrium
@@ -74,5 +75,6 @@ __all__ = [
     "tracking",
     "trunk_cable",
     "trunk_mesh",
+    "write_outputs",
 ]
 __version__ = "0.1.0"

@@ -203,28 +203,16 @@ def cmd_solve(args) -> int:
     finally:
         if executor is not None:
             executor.close()
-    from .io.output import write_outputs
+    from .io.output import measure, write_outputs
 
     try:
-        _measure(result, problem, not args.no_boundary, args.step, task)
+        measure(result, problem, not args.no_boundary, args.step, task)
         write_outputs(result, problem, out, args.quiet)
     except KeyboardInterrupt:  # after the run: its result files may be incomplete
         print(f"casadi-ws: interrupted while writing the results into {out}; some files may be missing: run the "
               f"same command with --overwrite to compute them again", file=sys.stderr)
         return 130
     return 0
-
-
-def _measure(result, problem, with_boundary: bool, step=None, task=None) -> None:
-    """A finished run's boundary (a forward grid's from its own nodes; forward-backward built its own) and
-    measures, as ``solve`` and ``demo`` report them."""
-    from .workspace.measures import measures
-
-    if result.method == "forward" and with_boundary:
-        from .workspace.boundary import boundary_of
-
-        result.boundary = boundary_of(result, problem)
-    result.measures = measures(result, step=step, task=task)
 
 
 def _result_dir(d) -> Path:
@@ -443,7 +431,7 @@ def cmd_study(args) -> int:
 
 def cmd_demo(args) -> int:
     from .workspace.forward import ForwardSettings, forward
-    from .io.output import write_outputs
+    from .io.output import measure, write_outputs
     from .io.problem import default_problem
 
     problem = default_problem()
@@ -451,7 +439,7 @@ def cmd_demo(args) -> int:
           f"{problem.mesh.n_tets} tetrahedra, {problem.material.model}, {problem.n_u} cables, "
           f"U = [0, 100] N x [0, 100] N, {args.nd} values per cable)")
     result = forward(problem, settings=ForwardSettings(n_d=args.nd, progress=True))
-    _measure(result, problem, with_boundary=True)
+    measure(result, problem)
     write_outputs(result, problem, _prepare_out(args.out, True)[0], quiet=False)
     return 0
 

@@ -6,6 +6,7 @@ test``'s workers share them out. The Dask recipe's scheduler and workers (port 8
 started once per test process, for the chains that name the scheduler; those chains form one xdist group.
 """
 
+import json
 import re
 import shlex
 import subprocess
@@ -179,6 +180,9 @@ def test_the_readme_python_script_runs_as_written(tmp_path):
     r = subprocess.run([sys.executable, "script.py"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     assert "coverage" in r.stdout and (tmp_path / "results" / "fb" / "summary.json").exists()
+    s = json.loads((tmp_path / "results" / "fb" / "summary.json").read_text())
+    assert s["measures"]["cells"] > 0 and s["boundary"] is not None  # the API's one call measures the result
+    assert (tmp_path / "results" / "fb" / "report.html").exists()
 
 
 def test_the_readmes_counts_of_bad_input_files_are_the_corpus():

@@ -5,15 +5,34 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-__all__ = ["write_outputs"]
+__all__ = ["measure", "write_outputs"]
 
 
-def write_outputs(result, problem, out: Path, quiet: bool = False) -> None:
-    """Result files plus the three-view and 3-D pictures and the interactive report into ``out``."""
+def measure(result, problem, boundary: bool = True, step=None, task=None) -> None:
+    """Give a finished run its boundary (a forward grid's from its own nodes; forward-backward builds its own
+    while it runs) and its measures (:func:`casadi_ws.workspace.measures.measures`), in place."""
+    from ..workspace.measures import measures
+
+    if result.method == "forward" and boundary:
+        from ..workspace.boundary import boundary_of
+
+        result.boundary = boundary_of(result, problem)
+    result.measures = measures(result, step=step, task=task)
+
+
+def write_outputs(result, problem, out, quiet: bool = True, boundary: bool = True) -> None:
+    """Everything ``casadi-ws solve`` writes, into the directory ``out``: the result files, the ParaView scene,
+    the three-view and 3-D pictures and the interactive report; a result without measures gets them first
+    (:func:`measure`, the boundary too unless ``boundary`` is False). The one call a script needs after
+    ``forward`` or ``forward_backward``; ``quiet`` False prints the summary lines the command prints."""
     from .plots import three_views, workspace_3d
     from .report import write_report
     from .scene import write_scene
 
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    if not result.measures:
+        measure(result, problem, boundary)
     result.save(out)
     scene = write_scene(problem, out)
     three_views(result, out / "three_views.png", problem.mesh, title=f"{problem.name}: {result.method} workspace")
