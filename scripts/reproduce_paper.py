@@ -266,15 +266,15 @@ Strict measures on the forward-backward grid first (`casadi_ws.compare`): the sh
 cloud occupies that forward-backward reports (recall), the share of forward points lying in reported cells,
 and the share of reported cells holding a forward point; then the lenient ones, labelled.
 
-| n_u | forward cloud (n_d, points) | forward cells | FB cells | recall (strict) | forward points in FB cells | FB cells with a forward point | coverage within one cell | precision within one cell | Hausdorff (mm) | volume forward (cm^3) | volume FB (cm^3) |
+| n_u | forward cloud (n_d, points) | forward cells | FB cells | recall (strict) | forward points in FB cells | FB cells with a forward point | coverage within one cell | precision within one cell | Hausdorff (mm) | cells × s³ forward (cm^3) | cells × s³ FB (cm^3) |
 |---|---|---|---|---|---|---|---|---|---|---|---|
 """ + "\n".join(f"| {n} | {r['fw_cloud_nd']}, {r['fw_cloud_points']} | {a['cells_a']} | {a['cells_b']} | "
                  f"{a['cells_a_in_b']:.3f} | {a['points_a_in_b_cells']:.3f} | {a['cells_b_in_a']:.3f} | "
                  f"{a['coverage_within_one_cell']:.3f} | {a['precision_within_one_cell']:.3f} | "
-                 f"{a['hausdorff'] * 1e3:.2f} | {a['volume_a'] * 1e6:.3f} | {a['volume_b'] * 1e6:.3f} |"
+                 f"{a['hausdorff'] * 1e3:.2f} | {a['cell_volume_a'] * 1e6:.3f} | {a['cell_volume_b'] * 1e6:.3f} |"
                  for (n, a), r in zip(agreement.items(), rows)) + """
 
-Volumes count occupied grid cells (one cell thick for the 2-cable surface). A forward cloud coarser than the
+The cells × s³ columns count occupied grid cells (one cell thick for the 2-cable surface): not volumes of the workspace. A forward cloud coarser than the
 grid leaves cells between its points empty, so its volume and the share of FB cells holding a forward point
 understate the agreement; the recall does not depend on that.
 

@@ -55,6 +55,12 @@ class ForwardSettings:
     trunk it saves 9 LUs in 10 but costs as much in GMRES work; it may pay on finer meshes."""
     store_states: bool = False
     """Keep every point's nodal displacements in the result (n_points x 3n floats)."""
+    maps: str = "exact"
+    """``exact``: every point's steerability and compliance from an LU of its own tangent (within 1e-5 of central
+    finite differences of independent equilibria on trunk_2cables, and the same whatever the grid's split
+    among workers). ``interpolated``: only the Newton points' LU, linear between them along a line or across
+    lines (an LU less per interpolated point; measured up to 8 % off finite differences on trunk_2cables at
+    n_d = 11, and 15 % apart between a serial and a 2-worker run, whose Newton points differ)."""
     workers: int = 1
     """Processes sweeping slices of the grid in parallel, each with its own model."""
     progress: bool = True
@@ -399,11 +405,12 @@ def _solve_line(model, us, first, settings, tol, sw: _Sweep, counters):
     return out
 
 
-def _check_line(model, line) -> tuple[np.ndarray, np.ndarray]:
+def _check_line(model, line, exact: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Admissibility masks of a line's points (0 for points that did not converge), and their maps. Newton
     points get every check, with the pivots of their own LU; a point between two Newton points of the line
     inherits stability and self-penetration from them when both pass those, and gets the cheap checks
-    itself. The maps (:mod:`.maps`) come from the point's own LU; between Newton points steerability and
+    itself. The maps (:mod:`.maps`) come from each point's own LU (``exact``: the Newton points' LU where it was
+    taken at the point, else a fresh one); with ``exact`` False, between Newton points steerability and
     compliance are interpolated linearly from them, the others computed at the point."""
     masks = np.zeros(len(line), dtype=np.int64)
     maps = np.full((len(line), len(MAPS) + 2 * model.n_u), np.nan)
@@ -420,21 +427,20 @@ def _check_line(model, line) -> tuple[np.ndarray, np.ndarray]:
         left, right = anchors[anchors < j], anchors[anchors > j]
         inherit = left.size and right.size and not (masks[left[-1]] | masks[right[0]]) & costly
         masks[j] = admissibility(model, eq.q, eq.u, eq.factorization, inherited=bool(inherit)).mask
-    # the maps: Newton points from their own LU; between them, steerability and compliance (which need an
-    # LU) linearly interpolated along the line, the others exact (an LU per point doubled the sweep's time)
+    # the maps: from each point's own LU; or (not exact) between Newton points steerability and compliance
+    # (which need an LU) linearly interpolated along the line, the others at the point
     lu_maps = [MAPS.index("steerability"), MAPS.index("compliance")]
     for j, eq in enumerate(line):
         if eq.status != CONVERGED:
             continue
-        if done[j]:
-            fac = eq.factorization if eq.factorization is not None else tangent_factorization(model, eq.q, eq.u)
-            A, _, G = sensitivity(model, eq.q, fac, compliance=True)  # one set of solves for both
-            m = point_maps(model, eq.q, eq.u, A, fac, G)
+        if done[j] or exact:
+            fac = eq.factorization if done[j] and eq.factorization is not None else None
+            m = _lu_maps(model, eq, fac)
         else:
             m = state_maps(model, eq.q, eq.u) | {"steerability": np.nan, "compliance": np.nan}
         maps[j] = [m[name] for name in MAPS] + list(m["states"]) + list(m["intensities"])
     for j in np.flatnonzero(~done):
-        if line[j].status != CONVERGED or not anchors.size:
+        if exact or line[j].status != CONVERGED or not anchors.size:
             continue
         left, right = anchors[anchors < j], anchors[anchors > j]
         a, b = (left[-1] if left.size else right[0]), (right[0] if right.size else left[-1])
@@ -459,7 +465,7 @@ def _solve_plane(model, us, first, settings, tol, sw: _Sweep, counters, L: int):
     for i in newton:
         idx = lines[i]
         line = _solve_line(model, us[idx], first + idx[0], settings, tol, sw, counters)
-        masks[idx], maps[idx] = _check_line(model, line)
+        masks[idx], maps[idx] = _check_line(model, line, settings.maps == "exact")
         for eq in line:
             # checked: the lines between need only its states; a plane's ~250 LUs kept to its end took 12 GB
             # per worker on the 3-cable trunk at n_d = 30
@@ -508,13 +514,23 @@ def _across(model, u, x, nodes, eqs, masks, maps, settings, tol, counters):
     costly = encode(("unstable", "self_penetration"))
     inherit = a is not None and b is not None and not (masks[a[1]] | masks[b[1]]) & costly
     mask = admissibility(model, eq.q, eq.u, None, inherited=bool(inherit)).mask
-    m = state_maps(model, eq.q, eq.u)
+    m = _lu_maps(model, eq) if settings.maps == "exact" else state_maps(model, eq.q, eq.u)
     row = np.array([m.get(name, np.nan) for name in MAPS] + list(m["states"]) + list(m["intensities"]))
-    a, b = a or b, b or a
-    w = 0.0 if a[0] == b[0] else (x - a[0]) / (b[0] - a[0])
-    lu_maps = [MAPS.index("steerability"), MAPS.index("compliance")]
-    row[lu_maps] = (1 - w) * maps[a[1], lu_maps] + w * maps[b[1], lu_maps]
+    if settings.maps != "exact":
+        a, b = a or b, b or a
+        w = 0.0 if a[0] == b[0] else (x - a[0]) / (b[0] - a[0])
+        lu_maps = [MAPS.index("steerability"), MAPS.index("compliance")]
+        row[lu_maps] = (1 - w) * maps[a[1], lu_maps] + w * maps[b[1], lu_maps]
     return eq, mask, row
+
+
+def _lu_maps(model, eq, fac=None) -> dict:
+    """The maps at a verified equilibrium from ``fac`` or, without one, a fresh LU of its own tangent: the LU a
+    Newton solve ends with may be a chord LU of an earlier iterate or of the point before."""
+    if fac is None or not np.array_equal(fac.q, eq.q):
+        fac = tangent_factorization(model, eq.q, eq.u)
+    A, _, G = sensitivity(model, eq.q, fac, compliance=True)  # one set of solves for both
+    return point_maps(model, eq.q, eq.u, A, fac, G)
 
 
 def _own_checks(model, eq):
@@ -527,8 +543,7 @@ def _own_checks(model, eq):
     fac = eq.factorization if eq.factorization is not None else tangent_factorization(model, eq.q, eq.u)
     eq.factorization = None
     mask = admissibility(model, eq.q, eq.u, fac).mask
-    A, _, G = sensitivity(model, eq.q, fac, compliance=True)
-    m = point_maps(model, eq.q, eq.u, A, fac, G)
+    m = _lu_maps(model, eq, fac)
     return mask, np.array([m[name] for name in MAPS] + list(m["states"]) + list(m["intensities"]))
 
 
@@ -602,7 +617,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
                     sw.history, sw.fac, sw.start, counters = snapshot
                     raise
                 if P == L:
-                    violations[a:b], maps[a:b] = _check_line(model, line)
+                    violations[a:b], maps[a:b] = _check_line(model, line, settings.maps == "exact")
                 for j, eq in enumerate(line, start=a):
                     tips[j], status[j], residual[j] = eq.tip, eq.status, eq.residual
                     if states is not None and eq.status == CONVERGED:
@@ -660,7 +675,7 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
     workers = max(1, min(int(workers), n // 50 or 1))
     fp = fingerprint("forward", model, {k: getattr(settings, k) for k in
                                         ("n_d", "predictor", "reuse_factorization", "krylov", "tol", "max_iter",
-                                         "store_states", "stride", "across")} | {"workers": workers, "format": 9})
+                                         "store_states", "stride", "across", "maps")} | {"workers": workers, "format": 9})
     run = RunState(checkpoint_dir, "forward", fp, resume, t0)
     try:
         cube = grid_inputs(problem) == problem.n_u and across_planes(problem.n_u, model.n_dof, settings)
