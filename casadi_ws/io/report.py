@@ -155,7 +155,7 @@ def write_report(result, path: str | Path, mesh=None, obstacles=()) -> Path:
 <style>body{{font-family:sans-serif;margin:0;display:flex;flex-wrap:wrap}}
 #view{{flex:1 1 600px;min-width:0;max-width:100%}} #view .js-plotly-plot{{width:100%}}
 #side{{flex:0 0 340px;order:2;padding:1em;box-sizing:border-box;overflow-wrap:anywhere}}
-th{{text-align:left;padding-right:1em;vertical-align:top}}
+th{{text-align:left;padding-right:1em;vertical-align:top;white-space:nowrap}}
 td{{font-variant-numeric:tabular-nums}}</style></head>
 <body><div id="side"><h2>Summary</h2>{_table(result)}
 <p>Colour: choose a map in the menu above the view. Maps: effort (RMS input fraction), steerability
