@@ -408,3 +408,49 @@ def test_only_the_face_nodes_another_starts_from_get_their_sensitivities():
                 chosen |= {j for j in range(k) if near is done[len(seeds) + j]}
             done.append((u, None, None, None))
         assert _starts_of_others(us, seeds, span) == chosen
+
+
+def test_clicking_a_point_shows_its_inputs_and_the_robot_deformed_there(tmp_path):
+    from casadi_ws.io.report import write_report
+    from casadi_ws.workspace.forward import ForwardSettings, forward
+
+    pb = small_trunk(n_cables=2)
+    kept = forward(pb, settings=ForwardSettings(n_d=4, progress=False, store_states=True))
+    bare = forward(pb, settings=ForwardSettings(n_d=4, progress=False))
+    pages = [write_report(r, tmp_path / f"{name}.html", pb.mesh) for name, r in (("kept", kept), ("bare", bare))]
+    exe = _browser()
+    if exe is None:
+        pytest.skip("no chromium on this machine (make test installs Debian's chromium with apt; it failed)")
+    from playwright.sync_api import sync_playwright
+
+    k = 10
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=exe, args=["--use-angle=swiftshader",
+                                                               "--enable-unsafe-swiftshader", "--no-sandbox"])
+        seen = []
+        for page_file in pages:
+            page = browser.new_page(viewport={"width": 1280, "height": 720})
+            errors = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(page_file.as_uri())
+            page.wait_for_selector("#workspace .gl-container canvas", timeout=60000)
+            page.evaluate("""k => { const gd = document.getElementById('workspace');
+                const c = gd.data.findIndex(t => t.name === 'reached points');
+                gd.emit('plotly_click', {points: [{curveNumber: c, pointNumber: k}]}); }""", k)
+            page.wait_for_timeout(300)
+            text = page.locator("#point").inner_text()
+            robot = page.evaluate("""() => { const t = document.getElementById('workspace').data.find(
+                t => t.name === 'robot at the clicked point'); return t ? [t.visible, Array.from(t.x),
+                Array.from(t.y), Array.from(t.z)] : null; }""")
+            seen.append((text, robot, errors))
+            page.close()
+        browser.close()
+    (text, robot, errors), (bare_text, bare_robot, bare_errors) = seen
+    assert not errors and not bare_errors
+    assert f"Point {k}" in text and "long0 (N)" in text and "admissible" in text and "drawn" in text
+    # the drawn robot's tip is the clicked point (the end effector is its tip node), away from the rest shape
+    V = np.array(robot[1:], float).T
+    assert robot[0] is True and np.linalg.norm(V - kept.points[k] * 1e3, axis=1).min() < 1e-3
+    assert np.linalg.norm(kept.points[k] - kept.rest_tip) > 5e-3
+    # without kept states the page says how to get the robot, and draws none
+    assert bare_robot is None and "--store-states" in bare_text and "long90 (N)" in bare_text
