@@ -99,8 +99,9 @@ def _prepare_out(path: str, overwrite: bool, resume: bool = False) -> tuple[Path
 
 def _print_finished(out: Path) -> int:
     s = json.loads((out / "summary.json").read_text())
-    f = s.get("failures") or {"prefiltered": 0, "not_reached": 0, "failed": s["n_failed"]}
-    why = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in f.items() if v or k == "failed")
+    from .workspace.result import failures_text
+
+    why = failures_text(s.get("failures") or {"failed": s["n_failed"]})
     print(f"{out}: the run is complete, nothing to resume: {s['method']}, {s['n_points']} reachable points, "
           f"{why}, {s['time_s']:.1f} s")
     for w in s.get("warnings", []):

@@ -362,9 +362,7 @@ class StaticModel:
         """Per node, the mean edge of the smallest element it belongs to (m): the scale of a safe nodal move
         (Newton's trust region, :data:`casadi_ws.solvers.equilibrium.TRUST_REGION`)."""
         if "_node_sizes" not in self.__dict__:
-            corners = self.mesh.nodes[self.mesh.tets[:, :4]]
-            pairs = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
-            h = np.mean([np.linalg.norm(corners[:, a] - corners[:, b], axis=1) for a, b in pairs], axis=0)
+            h = self.mesh.element_sizes()
             size = np.full(self.n_nodes, np.inf)
             np.minimum.at(size, self.mesh.tets.ravel(), np.repeat(h, self.mesh.tets.shape[1]))
             size[~np.isfinite(size)] = h.max()  # nodes of no element

@@ -18,7 +18,13 @@ from .materials import Material
 from .mesh import Mesh
 
 __all__ = ["AdmissibilitySettings", "AutoSelfContact", "ModelError", "ModelSpec", "SelfContactPair",
-           "SolverSettings"]
+           "SolverSettings", "ranged_inputs"]
+
+
+def ranged_inputs(u_min, u_max) -> np.ndarray:
+    """Indices of the inputs with a range (u_max > u_min): an input held at one value (a cable kept at its rest
+    length) still acts, but is no dimension of the box U (the forward grid, the boundary's faces, the measures)."""
+    return np.flatnonzero(np.asarray(u_max, float) > np.asarray(u_min, float))
 
 
 class ModelError(ValueError):

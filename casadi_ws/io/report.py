@@ -49,7 +49,7 @@ def _inputs(result) -> list[tuple[str, str]]:
              acts[i].get("unit", "") if i < len(acts) else "") for i in range(n)]
 
 
-def _figure(result, mesh, obstacles=()):
+def _figure(result, mesh, obstacles=(), shapes=None):
     import plotly.graph_objects as go
 
     from .scene import obstacle_surface
@@ -76,7 +76,6 @@ def _figure(result, mesh, obstacles=()):
         traces.append(go.Mesh3d(x=V[:, 0], y=V[:, 1], z=V[:, 2], i=T[:, 0], j=T[:, 1], k=T[:, 2],
                                 color="steelblue", opacity=0.3, name="workspace boundary", showlegend=True,
                                 flatshading=True, hoverinfo="skip"))
-    shapes = _shapes(result, mesh)
     if shapes is not None:
         X, T = np.asarray(mesh.nodes, float) * MM, boundary_faces(mesh)[:, :3]
         traces.append(go.Mesh3d(x=X[:, 0], y=X[:, 1], z=X[:, 2], i=T[:, 0], j=T[:, 1], k=T[:, 2],
@@ -130,7 +129,7 @@ def _shapes(result, mesh):
     return pick, ((X[None] + Q) * MM).astype(np.float32), nodes
 
 
-def _details(result, mesh) -> dict:
+def _details(result, mesh, shapes=None) -> dict:
     """What the page shows for a clicked point: its inputs and intensities with units, maps, admissibility,
     and where kept its deformed robot (the boundary surface's vertices, float32, mm, base64)."""
     import base64
@@ -144,7 +143,6 @@ def _details(result, mesh) -> dict:
            "tip_mm": (np.asarray(result.points) * MM).round(4).tolist(),
            "contact_N": np.asarray(maps["contact"], float).round(6).tolist(),
            "admissible": [", ".join(decode(int(v))) or "yes" for v in viol]}
-    shapes = _shapes(result, mesh)
     if shapes is not None:
         pick, V, nodes = shapes
         out["shape_of"] = {int(i): k for k, i in enumerate(pick)}
@@ -244,10 +242,11 @@ def write_report(result, path: str | Path, mesh=None, obstacles=()) -> Path:
     import plotly.io as pio
 
     path = Path(path)
-    fig = _figure(result, mesh, obstacles)
+    shapes = _shapes(result, mesh)
+    fig = _figure(result, mesh, obstacles, shapes)
     plot = pio.to_html(fig, full_html=False, include_plotlyjs=True, div_id="workspace",
                        config={"displaylogo": False, "responsive": True})
-    points_json = json.dumps(_details(result, mesh)).replace("</", "<\\/")  # inside <script>: no "</"
+    points_json = json.dumps(_details(result, mesh, shapes)).replace("</", "<\\/")  # inside <script>: no "</"
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>casadi-ws: {html.escape(result.problem.get('name', ''))}</title>
 <style>body{{font-family:sans-serif;margin:0;display:flex;flex-wrap:wrap}}

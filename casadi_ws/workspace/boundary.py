@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..fem.spec import ranged_inputs
 from ..fem.surface import signed_distance, winding_numbers
 from ..solvers.admissible import admissibility
 from ..solvers.equilibrium import CONVERGED, solve_equilibrium, tangent_factorization
@@ -230,9 +231,9 @@ class _Box:
     length, is no dimension of it): unit coordinates of those inputs, and back to u."""
 
     def __init__(self, model):
-        self.lo, span = model.u_min, model.u_max - model.u_min
-        self.active = np.flatnonzero(span > 0)
-        self.span = span[self.active]
+        self.lo = model.u_min
+        self.active = ranged_inputs(model.u_min, model.u_max)
+        self.span = (model.u_max - model.u_min)[self.active]
         self.n = self.active.size
 
     def unit(self, u) -> np.ndarray:

@@ -26,6 +26,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from ..fem.model import StaticModel
+from ..fem.spec import ranged_inputs
 from ..runtime.executor import Executor, deferred_interrupt, make_executor, one_blas_thread, small_pages
 from ..runtime.run_state import RunState, fingerprint
 from ..solvers.admissible import VIOLATIONS, admissibility, encode
@@ -108,7 +109,7 @@ def input_grid(u_min, u_max, n_d: int) -> np.ndarray:
     point otherwise: the SOFA Trunk with its four short cables held, 11^8 equilibria for 11^4)."""
     u_min, u_max = np.asarray(u_min, float), np.asarray(u_max, float)
     axes = np.linspace(0.0, 1.0, n_d) if n_d > 1 else np.zeros(1)
-    active = np.flatnonzero(u_max > u_min)
+    active = ranged_inputs(u_min, u_max)
     idx = np.zeros((n_d ** active.size if active.size else 1, u_min.size), dtype=np.int64)
     if active.size:
         idx[:, active] = snake_order(n_d, active.size)
@@ -118,7 +119,7 @@ def input_grid(u_min, u_max, n_d: int) -> np.ndarray:
 
 def grid_inputs(problem) -> int:
     """How many inputs span the forward grid (those with a range; ``problem`` or a model)."""
-    return int(np.count_nonzero(np.asarray(problem.u_max, float) > np.asarray(problem.u_min, float)))
+    return int(ranged_inputs(problem.u_min, problem.u_max).size)
 
 
 def lagrange_weights(xs, x) -> np.ndarray:
@@ -454,7 +455,7 @@ def _solve_plane(model, us, first, settings, tol, sw: _Sweep, counters, L: int):
     ``across``-th line solved by :func:`_solve_line`, the lines between interpolated across lines and
     verified. Returns the equilibria, admissibility masks and maps of its points."""
     lines = [np.arange(a, min(a + L, len(us))) for a in range(0, len(us), L)]
-    ax, lax = np.flatnonzero(model.u_max > model.u_min)[-2:]
+    ax, lax = ranged_inputs(model.u_min, model.u_max)[-2:]
     x = np.array([us[idx[0], ax] for idx in lines])
     newton = _grid_positions(len(lines), across_stride(settings, grid_inputs(model), len(lines)),
                              len(lines) > 1 and bool(x[-1] < x[0]))

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..fem.spec import ranged_inputs
 from .compare import _index, cell_set
 
 __all__ = ["Task", "measures", "read_task"]
@@ -127,7 +128,7 @@ def measures(result, step: float | None = None, task: Task | None = None, origin
                    boundary_area=b.area)
     if u.ndim == 2 and result.n_points:
         lo, hi = np.asarray(result.problem.get("u_min", u.min(0))), np.asarray(result.problem.get("u_max", u.max(0)))
-        free = np.flatnonzero(hi > lo) if lo.shape == (u.shape[1],) else np.arange(u.shape[1])
+        free = ranged_inputs(lo, hi) if lo.shape == (u.shape[1],) else np.arange(u.shape[1])
         if free.size == 2:
             out["area"] = surface_area(result.points, u[:, free], lo[free], hi[free], 3 * step)
             if b is not None and b.method == "input-patch":

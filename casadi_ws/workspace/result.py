@@ -113,10 +113,7 @@ class WorkspaceResult:
 
     def failures_line(self) -> str:
         """``12 failed`` or, where some rows are not failures, ``226 prefiltered, 9 not reached, 2 failed``."""
-        f = self.failures()
-        if not f["prefiltered"] and not f["not_reached"]:
-            return f"{f['failed']} failed"
-        return f"{f['prefiltered']} prefiltered, {f['not_reached']} not reached, {f['failed']} failed"
+        return failures_text(self.failures())
 
     def warnings(self) -> list[str]:
         """Plain-language warnings about the run (e.g. many failed points)."""
@@ -317,6 +314,12 @@ def _load_boundary(info, a):
                     closed=info["closed"], volume=info["volume"], volume_error=info["volume_error"],
                     area=info["area"], tolerance=info["tolerance"], failed=info.get("failed_nodes", 0),
                     curve=curve if curve is not None and len(curve) else None, notes=info.get("notes", []))
+
+
+def failures_text(f: dict) -> str:
+    """:meth:`WorkspaceResult.failures` (or a summary's ``failures``) in words; zero counts left out but
+    ``failed``'s."""
+    return ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in f.items() if v or k == "failed")
 
 
 def describe(problem, model) -> dict:
