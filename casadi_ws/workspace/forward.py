@@ -59,7 +59,9 @@ class ForwardSettings:
     maps: str = "exact"
     """``exact``: every point's steerability and compliance from an LU of its own tangent (within 1e-5 of central
     finite differences of independent equilibria on trunk_2cables, and the same whatever the grid's split
-    among workers). ``interpolated``: only the Newton points' LU, linear between them along a line or across
+    among workers; it costs an LU per interpolated point: 2.4x the sweep of trunk_2cables at n_d = 100, where
+    most points are interpolated, BENCHMARKS.md "forward"). ``interpolated``: only the Newton points' LU,
+    linear between them along a line or across
     lines (an LU less per interpolated point; measured up to 8 % off finite differences on trunk_2cables at
     n_d = 11, and 15 % apart between a serial and a 2-worker run, whose Newton points differ)."""
     workers: int = 1
