@@ -243,15 +243,18 @@ def cmd_boundary(args) -> int:
     d = _result_dir(args.result)
     if args.n < 3 or args.n % 2 == 0:
         raise UsageError(f"--n: expected an odd integer >= 3, got {args.n}")
+    if args.fold_n < 5 or args.fold_n % 2 == 0 or 720720 % (args.fold_n - 1):
+        raise UsageError(f"--fold-n: expected an odd integer >= 5 (9, 13, 17, ...), got {args.fold_n}")
     result = load_result(d)
     problem = _problem_of(result, args.problem)
-    result.boundary = boundary_of(result, problem, settings=BoundarySettings(n=args.n))
+    result.boundary = boundary_of(result, problem, settings=BoundarySettings(n=args.n, fold_n=args.fold_n))
     result.measures = measures(result, task=None) | {k: v for k, v in result.measures.items() if k.startswith("task")}
     write_outputs(result, problem, d, quiet=True)
     b = result.boundary.summary()
     m = result.measures
     print(json.dumps({"boundary": b, "volume": m["volume"], "volume_method": m["volume_method"],
-                      **{k: m[k] for k in ("area", "length") if k in m}}, indent=2, default=float))
+                      **{k: m[k] for k in ("area", "length", "folded", "volume_upper", "volume_lower") if k in m}},
+                     indent=2, default=float))
     return 0
 
 
@@ -518,6 +521,9 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("boundary", help="build the boundary surface, volume and area of an existing result")
     b.add_argument("result", help="result directory")
     b.add_argument("--n", type=int, default=5, help="nodes per edge of each face of U, odd (5; forward: its n_d)")
+    b.add_argument("--fold-n", type=int, default=9,
+                   help="where the map folds: nodes per input of the grid of U whose cells' images make the "
+                        "surface, odd (9; a finer forward grid is used as it is)")
     b.add_argument("--problem", default=None, help="the problem file (default: the one named in summary.json)")
     b.set_defaults(func=cmd_boundary)
 

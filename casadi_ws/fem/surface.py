@@ -89,8 +89,13 @@ def winding_number(X: np.ndarray, faces: np.ndarray, p: np.ndarray) -> float:
 
 
 def winding_numbers(X: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """:func:`winding_number` around each of ``points`` (k, 3), at once."""
-    tri = X[np.asarray(faces)[:, :3]][None] - np.asarray(points, dtype=float)[:, None, None]  # (k, faces, 3, 3)
+    """:func:`winding_number` around each of ``points`` (k, 3), at once (in pieces of ~2e6 point-triangle
+    pairs, 150 MB)."""
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    piece = max(1, 2_000_000 // max(len(faces), 1))
+    if len(points) > piece:
+        return np.concatenate([winding_numbers(X, faces, points[i:i + piece]) for i in range(0, len(points), piece)])
+    tri = X[np.asarray(faces)[:, :3]][None] - points[:, None, None]  # (k, faces, 3, 3)
     a, b, c = tri[:, :, 0], tri[:, :, 1], tri[:, :, 2]
     la, lb, lc = (np.linalg.norm(v, axis=-1) for v in (a, b, c))
     num = np.einsum("kij,kij->ki", a, np.cross(b, c))

@@ -48,7 +48,8 @@ def write_outputs(result, problem, out, quiet: bool = True, boundary: bool = Tru
         extra = "".join(f" {f}" for f in ("cells.vtu", "boundary.vtu", "boundary.stl") if (out / f).exists())
         m = result.measures
         if m.get("volume") is not None and m.get("volume_method") == "boundary":
-            print(f"volume {m['volume'] * 1e6:.4g} cm^3 (boundary surface, +-{m['volume_error'] * 1e6:.2g}); "
+            how = "the union of U's grid cells' images: the map folds" if m.get("folded") else "boundary surface"
+            print(f"volume {m['volume'] * 1e6:.4g} cm^3 ({how}, +-{m['volume_error'] * 1e6:.2g}); "
                   f"the cells cover {m['cell_volume'] * 1e6:.4g} cm^3")
         elif m.get("area") is not None:
             print(f"area {m['area'] * 1e4:.4g} cm^2 (two inputs: the workspace is a surface)")

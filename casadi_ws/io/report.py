@@ -216,7 +216,12 @@ def _table(result) -> str:
     if m.get("volume") is not None:
         err = m.get("volume_error")
         rows.append(("volume", f"{m['volume'] * 1e6:.4g} cm³" + (f" ± {err * 1e6:.2g}" if err else "")
-                     + " (boundary)"))
+                     + (" (the map folds: union of the images of U's grid cells)" if m.get("folded")
+                        else " (boundary)")))
+    if m.get("volume_upper") is not None:
+        rows.append(("volume bounds", (f"{m['volume_lower'] * 1e6:.4g} (cells with all 26 neighbours) to "
+                                       if m.get("volume_lower") is not None else "at most ")
+                     + f"{m['volume_upper'] * 1e6:.4g} cm³ (∫|det dp/du|)"))
     if m.get("cell_volume") is not None:
         rows.append(("cells × s³", f"{m['cell_volume'] * 1e6:.4g} cm³ ({m['cells']} cells of "
                                    f"{m['cell_step'] * 1e3:.3g} mm)"))

@@ -10,6 +10,9 @@ images of U's 3-dimensional faces. Hence:
   n x n grid of verified equilibria and triangulated. That is a closed surface by construction (faces share
   their edge nodes), oriented outwards by the sign of det A, and its enclosed volume (divergence theorem)
   equals the Jacobian integral  V = int_U |det A| du  up to the triangulation's chord error, O(h^2).
+  Where det A changes sign (a fold: its sign at the face nodes, at the method's configurations, or a forward
+  grid's turned-over tetrahedra), the surface is instead the union of the images of a grid of U's cells
+  (``input-cells``, :mod:`.images`), which stays the boundary whatever the map does.
 * **4 or 5 inputs.** Every 2-face of U (two inputs free, the others at a bound) is sampled; a face is kept
   when its triangles lie outside the images of the 3-faces it does not belong to (tested with the closed
   surfaces of those images); the kept faces, oriented by the 3-face they bound, must close (every edge
@@ -43,6 +46,7 @@ from ..fem.surface import signed_distance, winding_numbers
 from ..solvers.admissible import admissibility
 from ..solvers.equilibrium import CONVERGED, solve_equilibrium, tangent_factorization
 from ..solvers.sensitivity import second_order, sensitivity
+from .images import kuhn_tetrahedra, tetrahedron_volumes, union_of_images
 
 __all__ = ["Boundary", "BoundarySettings", "Seeds", "boundary", "boundary_of", "distance_outside", "two_faces"]
 
@@ -62,6 +66,11 @@ class BoundarySettings:
     the 3-cable trunk's volume 0.8 % below its Jacobian integral (BENCHMARKS.md "Workspace volume": -0.77 %)."""
     enabled: bool = True
     """Build the surface with every forward-backward result (``--no-boundary`` turns it off)."""
+    fold_n: int = 9
+    """Where the map folds (3 inputs): nodes per input of the grid of U whose cells' images make the surface
+    (odd, >= 5; a forward grid at least as fine is used as it is). Its error estimate is the difference from
+    the grid through every other node: on the 3-cable SOFA trunk with 20 N cables, 139.8 cm^3 at 9 (estimate
+    36) and 133.4 at 17 (estimate 6.5) (tests/test_folds.py, docs/methods.md "Folds")."""
 
 
 @dataclass
@@ -75,7 +84,9 @@ class Boundary:
     u: np.ndarray
     """(k, n_u) the inputs of the vertices."""
     method: str
-    """``input-faces`` (a closed surface), ``input-patch`` (2 inputs: the surface W) or ``none``."""
+    """``input-faces`` (a closed surface: the faces' images), ``input-cells`` (a closed surface: the union of
+    the images of U's grid cells, built where the map folds, :mod:`.images`), ``input-patch`` (2 inputs: the
+    surface W) or ``none``."""
     closed: bool = False
     """Every edge is shared by exactly two triangles, traversed once each way."""
     volume: float | None = None
@@ -100,11 +111,21 @@ class Boundary:
     factorisations."""
     checks: dict = field(default_factory=dict)
     """Results of checking the surface against the method's points (``points_outside``, ``max_outside``)."""
+    fold: dict = field(default_factory=dict)
+    """Where det dp/du changes sign (3 inputs): ``positive`` / ``negative`` samples of it (face nodes, the
+    method's configurations) or turned-over tetrahedra of a forward grid, ``inputs`` (up to 8 inputs next to a
+    sign change), ``jacobian_integral`` (m^3, an upper bound of the volume), ``turned_over`` / ``tetrahedra``
+    of the grid the surface was built on. Empty: no fold seen."""
+
+    @property
+    def encloses(self) -> bool:
+        """A closed surface with a volume (``input-faces`` or ``input-cells``)."""
+        return self.method in ("input-faces", "input-cells") and self.closed
 
     def check_points(self, points) -> dict:
         """How many of ``points`` lie outside the closed surface by more than its tolerance (every verified
         point lies in W, so any is a defect of the surface); stored in :attr:`checks`."""
-        if self.method != "input-faces" or not len(points):
+        if not self.encloses or not len(points):
             return {}
         d = distance_outside(self, points)
         self.checks = {"points_checked": int(len(points)),
@@ -121,12 +142,21 @@ class Boundary:
                 "volume_error": self.volume_error, "area": self.area, "tolerance": self.tolerance,
                 "vertices": int(len(self.vertices)), "triangles": int(len(self.triangles)),
                 "inadmissible_vertices": int(np.count_nonzero(self.violations)) if self.violations is not None
-                else 0, "failed_nodes": self.failed, "notes": list(self.notes)}
+                else 0, "failed_nodes": self.failed, "notes": list(self.notes),
+                **({"fold": self.fold} if self.fold else {})}
 
 
 def distance_outside(b: Boundary, points) -> np.ndarray:
-    """Signed distance of each point to a closed, outward-oriented surface (> 0 outside), m."""
-    return signed_distance(b.vertices, b.triangles, points)
+    """Signed distance of each point to a closed, outward-oriented surface (> 0 outside), m. VTK's sign comes
+    from the nearest triangle's normal, which is wrong next to a sharp crease (the union of a folded map's
+    images has many: 460 of 2000 points inside read as outside on tests/test_folds.py's map); the points it
+    puts outside are settled by their winding number."""
+    d = signed_distance(b.vertices, b.triangles, points)
+    out = np.flatnonzero(d > 0)
+    if len(out):
+        inside = np.abs(winding_numbers(b.vertices, b.triangles, np.asarray(points, float)[out])) > 0.5
+        d[out[inside]] *= -1.0
+    return d
 
 
 def two_faces(n_u: int):
@@ -247,13 +277,15 @@ class _Box:
 
 
 def _solve_nodes(model, us: np.ndarray, seeds: list | None = None):
-    """Equilibria at ``us`` (in continuation order): tips, status, admissibility violations, and the number
-    of LU factorisations. Each start is the nearest solved node's or seed's (u, q, S, Q) state plus its
+    """Equilibria at ``us`` (in continuation order): tips, status, admissibility violations, the number
+    of LU factorisations and det dp/du over the inputs with a range (NaN unless there are 3 of them). Each start is the nearest solved node's or seed's (u, q, S, Q) state plus its
     tangent step S du, and Q(du, du) / 2 from a seed that has Q (the exploration's own d2q/du2).
 
     Why Q: measured on the 4-cable trunk, Newton from every one of the 328 face nodes' seeds took 450 LUs
     (5.4-5.8 s, one process) with it against 614 (7.9 s) with S du alone, none failing either way."""
     tips = np.full((len(us), 3), np.nan)
+    dets = np.full(len(us), np.nan)
+    box = _Box(model)
     status = np.zeros(len(us), dtype=int)
     viol = np.zeros(len(us), dtype=np.int64)
     done = list(seeds or [])  # (u, q, S, Q)
@@ -282,10 +314,13 @@ def _solve_nodes(model, us: np.ndarray, seeds: list | None = None):
         fac = eq.factorization
         if fac is None:
             fac = tangent_factorization(model, eq.q, eq.u)
-        S = sensitivity(model, eq.q, fac)[1] if k in wanted else None
+        # A at every node (one solve with n_u right-hand sides on the LU at hand): its sign is the fold test
+        A, S = sensitivity(model, eq.q, fac)
+        if box.n == 3:
+            dets[k] = np.linalg.det(A[:, box.active])
         viol[k] = admissibility(model, eq.q, eq.u, fac).mask
-        done.append((u.copy(), eq.q, S, None))
-    return tips, status, viol, n_fac
+        done.append((u.copy(), eq.q, S if k in wanted else None, None))
+    return tips, status, viol, n_fac, dets
 
 
 def _starts_of_others(us, starts: list, span) -> set:
@@ -374,12 +409,13 @@ def _three_faces(faces):
 
 
 def boundary(model, settings: BoundarySettings | None = None, executor=None, problem=None,
-             known: tuple | None = None, seeds: Seeds | None = None) -> Boundary:
+             known: tuple | None = None, seeds: Seeds | None = None, samples: tuple | None = None) -> Boundary:
     """The boundary of the workspace p(U) (see the module's docstring).
 
     ``executor`` (with ``problem``) solves the face nodes in parallel; ``known`` = (u, tips) of verified
     equilibria to take instead of solving (e.g. a forward grid whose nodes include the faces' nodes);
-    ``seeds``: verified configurations to start the nodes' Newton solves from (:class:`Seeds`).
+    ``seeds``: verified configurations to start the nodes' Newton solves from (:class:`Seeds`); ``samples`` =
+    (u, det dp/du) at the method's verified configurations, read for the sign of det A (a fold).
     """
     settings = settings or BoundarySettings()
     n = int(settings.n)
@@ -392,15 +428,18 @@ def boundary(model, settings: BoundarySettings | None = None, executor=None, pro
         return Boundary(np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros((0, model.n_u)), "none",
                         notes=[f"no boundary surface ({why}): no volume (cell_volume counts the cells)"])
     nodes = _Nodes(model, executor, problem, known, seeds.of() if seeds is not None else {})
+    nodes.fold_n = int(settings.fold_n)
+    if nodes.fold_n < 5 or nodes.fold_n % 2 == 0 or 720720 % (nodes.fold_n - 1):
+        raise ValueError(f"boundary: fold_n must be odd, >= 5 and n - 1 must divide 720720, got {nodes.fold_n}")
     known_keys = set(nodes.tip)
-    b = _surface(nodes, n)
+    b = _surface(nodes, n, samples)
     b.counters = {"solved_nodes": len(nodes.used - known_keys), "known_nodes": len(nodes.used & known_keys),
                   "seeded_nodes": len((nodes.used - known_keys) & set(nodes.seeds)),
                   "factorizations": nodes.factorizations}
     return b
 
 
-def _surface(nodes, n) -> Boundary:
+def _surface(nodes, n, samples=None) -> Boundary:
     n_u = nodes.box.n
     if n_u == 2:
         out = nodes.solve([(0, 1, {})], n)
@@ -410,6 +449,9 @@ def _surface(nodes, n) -> Boundary:
     screen = nodes.solve(faces, n if n_u == 3 else 3)
     if isinstance(screen, Boundary):
         return screen
+    fold = nodes.fold(samples) if n_u == 3 else {}
+    if fold:
+        return _folded_surface(nodes, n, fold)
     keep, flip, notes = _orient(*screen, faces)
     if n_u > 3:
         notes.append(f"{len(keep)} of {len(faces)} faces of U bound the workspace")
@@ -438,7 +480,7 @@ class _Nodes:
     def __init__(self, model, executor, problem, known, seeds):
         self.model, self.executor, self.problem, self.seeds = model, executor, problem, seeds
         self.box = _Box(model)
-        self.tip, self.viol = {}, {}
+        self.tip, self.viol, self.det = {}, {}, {}
         self.used = set()  # the nodes of every face asked for
         self.factorizations = 0
         if known is not None:
@@ -446,16 +488,56 @@ class _Nodes:
                 if np.all(np.isfinite(p)):
                     self.tip[_key(self.box.unit(u))] = np.asarray(p, float)
                     self.viol[_key(self.box.unit(u))] = 0
+        self.known_n = self._known_grid()
 
-    def solve(self, faces, n):
-        """(V, U, violations, face triangles [fine, every other node]) over ``faces``' n x n nodes, or a
-        :class:`Boundary` saying that some did not converge."""
-        n_u = self.box.n
-        grids = [_face_nodes(f, n, n_u).reshape(-1, n_u) for f in faces]
+    def _known_grid(self) -> int:
+        """n if the known nodes hold a whole n x n x n grid of U (a forward grid, n odd >= 5), else 0."""
+        n = round(len(self.tip) ** (1.0 / 3.0)) if self.box.n == 3 else 0
+        if n < 5 or n % 2 == 0 or (720720 % (n - 1)):
+            return 0
+        return n if all(_key(s) in self.tip for s in _grid_nodes(n)) else 0
+
+    def fold(self, samples=None) -> dict:
+        """Evidence that det dp/du changes sign over U (3 inputs), from the turned-over tetrahedra of a known
+        grid, det A at the face nodes solved here and at the method's ``samples`` = (u, det A); {} if none.
+        Why a relative threshold: det A is a product of three columns each ~1e-6 accurate, so a sign is read
+        only where |det A| is above 1e-6 of the largest."""
+        out, where = {}, []
+        if self.known_n:
+            n = self.known_n
+            grid = _grid_nodes(n)
+            P = np.array([self.tip[_key(s)] for s in grid])
+            T = kuhn_tetrahedra(n)
+            v = tetrahedron_volumes(P, T)
+            v = np.where(np.abs(v) > 1e-9 * np.abs(v).max(initial=0.0), v, 0.0)
+            pos, neg = np.count_nonzero(v > 0), np.count_nonzero(v < 0)
+            if pos and neg:
+                out.update(grid_tetrahedra_positive=int(pos), grid_tetrahedra_negative=int(neg))
+                minority = v < 0 if neg <= pos else v > 0
+                where.append(self.box.u(grid[T[minority]].mean(axis=1)))
+        u = [self.box.u(np.array(s)) for s in (np.array(k) / 720720 for k in self.det)]
+        d = list(self.det.values())
+        if samples is not None:
+            u += list(np.asarray(samples[0], float))
+            d += list(np.asarray(samples[1], float))
+        d, u = np.asarray(d, float), np.asarray(u, float).reshape(len(d), len(self.model.u_min))
+        ok = np.isfinite(d)
+        d, u = d[ok], u[ok]
+        d = np.where(np.abs(d) > 1e-6 * np.abs(d).max(initial=0.0), d, 0.0)
+        pos, neg = np.count_nonzero(d > 0), np.count_nonzero(d < 0)
+        if pos and neg:
+            out.update(det_positive=int(pos), det_negative=int(neg))
+            where.append(u[d < 0] if neg <= pos else u[d > 0])
+        if out:
+            w = np.vstack(where)
+            out["inputs"] = w[np.linspace(0, len(w) - 1, min(8, len(w))).astype(int)].tolist()
+        return out
+
+    def solve_nodes(self, nodes) -> int:
+        """Solve the ``nodes`` (unit coordinates) not known yet; the number that did not converge."""
         keys = {}
-        for g in grids:
-            for s in g:
-                keys.setdefault(_key(s), s)
+        for s in nodes:
+            keys.setdefault(_key(s), s)
         self.used |= set(keys)
         todo = [k for k in keys if k not in self.tip]
         if todo:
@@ -470,11 +552,42 @@ class _Nodes:
                 answers = [_solve_nodes(self.model, *job) for job in jobs]
             else:
                 answers = self.executor.map(_solve_job, self.problem, jobs)
-            for c, (tips, status, v, n_fac) in zip(chunks, answers):
+            for c, (tips, status, v, n_fac, dets) in zip(chunks, answers):
                 self.factorizations += n_fac
-                for m, t, st, vv in zip(c, tips, status, v):
+                for m, t, st, vv, d in zip(c, tips, status, v, dets):
                     if st == CONVERGED:
-                        self.tip[order[m]], self.viol[order[m]] = t, vv
+                        self.tip[order[m]], self.viol[order[m]], self.det[order[m]] = t, vv, d
+        return sum(k not in self.tip for k in keys)
+
+    def sweep(self, m: int) -> int:
+        """Solve an m x m x m grid of U by the forward method's sweep (continuation along grid lines with its
+        predictors, over the executor's workers); the number of nodes that did not converge. Why not
+        :meth:`solve_nodes`: on the folded 3-cable SOFA trunk its nearest-node continuation took 10,720 LUs
+        for the 9^3 grid (44 s, 2 workers), the sweep 18.6 s."""
+        from .forward import ForwardSettings, forward
+
+        fw = forward(self.problem, settings=ForwardSettings(n_d=m, progress=False, maps="interpolated"),
+                     model=self.model, executor=self.executor)
+        self.factorizations += int(fw.counters.get("factorizations", 0))
+        for u, p, v in itertools.chain(zip(fw.u, fw.points, fw._violations()),
+                                       zip(fw.arrays["excluded_u"], fw.arrays["excluded_points"],
+                                           fw.arrays["excluded_violations"])):
+            k = _key(self.box.unit(u))
+            self.tip[k], self.viol[k] = np.asarray(p, float), int(v)
+        keys = {_key(s) for s in _grid_nodes(m)}
+        self.used |= keys
+        return sum(k not in self.tip for k in keys)
+
+    def solve(self, faces, n):
+        """(V, U, violations, face triangles [fine, every other node]) over ``faces``' n x n nodes, or a
+        :class:`Boundary` saying that some did not converge."""
+        n_u = self.box.n
+        grids = [_face_nodes(f, n, n_u).reshape(-1, n_u) for f in faces]
+        keys = {}
+        for g in grids:
+            for s in g:
+                keys.setdefault(_key(s), s)
+        self.solve_nodes(list(keys.values()))
         names = list(keys)
         index = {k: m for m, k in enumerate(names)}
         V = np.array([self.tip.get(k, np.full(3, np.nan)) for k in names])
@@ -487,6 +600,73 @@ class _Nodes:
                                    f"the cells'"])
         ids = [np.array([index[_key(s)] for s in g]) for g in grids]
         return V, U, vmask, [[i[_triangles(n, sub)] for i in ids] for sub in (1, 2)]
+
+
+def _grid_nodes(n: int) -> np.ndarray:
+    """(n^3, 3) unit coordinates of an n x n x n grid of U, node (i n + j) n + k."""
+    s = np.linspace(0.0, 1.0, n)
+    return np.stack(np.meshgrid(s, s, s, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
+def _folded_surface(nodes, n, fold) -> Boundary:
+    """3 inputs whose map folds: the union of the images of an m x m x m grid's cells (:mod:`.images`), m the
+    known forward grid's or 2 n - 1; the volume's error from the union through every other node."""
+    m = nodes.known_n if nodes.known_n >= nodes.fold_n else nodes.fold_n
+    grid = _grid_nodes(m)
+    failed = nodes.sweep(m) if m != nodes.known_n and nodes.problem is not None else nodes.solve_nodes(grid)
+    why = (f"det dp/du changes sign over U (the map folds over itself: {_fold_words(fold)}), so the images of "
+           f"U's faces are not the workspace's boundary")
+    if failed:
+        return Boundary(np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros((0, nodes.model.n_u)), "none",
+                        failed=failed, fold=fold,
+                        notes=[f"{why}; {failed} of the {m}^3 grid nodes that would bound it did not converge: no "
+                               f"volume (cell_volume counts the cells)"])
+    keys = [_key(s) for s in grid]
+    P = np.array([nodes.tip[k] for k in keys])
+    fine = union_of_images(P, m)
+    coarse = union_of_images(P.reshape(m, m, m, 3)[::2, ::2, ::2].reshape(-1, 3), (m + 1) // 2)
+    V, T = fine["vertices"], fine["triangles"]
+    # vertices at grid nodes carry their inputs and admissibility; where sheets cross there are none
+    from scipy.spatial import cKDTree
+
+    dist, j = cKDTree(P).query(V)
+    at = dist <= 1e-9 * max(float(np.ptp(P, axis=0).max()), 1e-300)
+    U = np.full((len(V), nodes.model.n_u), np.nan)
+    U[at] = nodes.box.u(grid[j[at]])
+    vmask = np.zeros(len(V), dtype=np.int64)
+    vmask[at] = [nodes.viol.get(keys[i], 0) for i in j[at]]
+    fold.update(jacobian_integral=fine["jacobian_integral"], turned_over=fine["turned_over"],
+                tetrahedra=fine["tetrahedra"], grid=m)
+    notes = [f"{why}: the surface is the union of the images of the {(m - 1) ** 3} cells of a {m}^3 grid of U "
+             f"(their tetrahedra, {fine['turned_over']} of {fine['tetrahedra']} turned over); the integral of "
+             f"|det dp/du| over U, {fine['jacobian_integral'] * 1e6:.4g} cm^3, counts the overlapping sheets "
+             f"twice"]
+    b = Boundary(V, T, U, "input-cells", closed=_closed(T), volume=fine["volume"],
+                 volume_error=abs(fine["volume"] - coarse["volume"]), area=_area(V, T),
+                 tolerance=_grid_tolerance(P.reshape(m, m, m, 3)), violations=vmask, notes=notes, fold=fold)
+    if not b.closed:
+        b.method, b.volume, b.volume_error = "none", None, None
+        b.notes.append("the union's surface does not close: no volume (cell_volume counts the cells)")
+    return b
+
+
+def _fold_words(fold) -> str:
+    parts = []
+    if "det_positive" in fold:
+        parts.append(f"{fold['det_positive']} of its samples positive, {fold['det_negative']} negative")
+    if "grid_tetrahedra_positive" in fold:
+        parts.append(f"{min(fold['grid_tetrahedra_positive'], fold['grid_tetrahedra_negative'])} of the forward "
+                     f"grid's {fold['grid_tetrahedra_positive'] + fold['grid_tetrahedra_negative']} tetrahedra "
+                     f"turned over")
+    return "; ".join(parts)
+
+
+def _grid_tolerance(P) -> float:
+    """:func:`_tolerance` of a 3-D grid of tips (m, m, m, 3): half the largest distance between a node and the
+    chord of its two neighbours two nodes away, along each axis of the grid."""
+    d = [np.linalg.norm(np.moveaxis(P, a, 0)[1:-1:2] - 0.5 * (np.moveaxis(P, a, 0)[:-2:2] + np.moveaxis(P, a, 0)[2::2]),
+                        axis=-1).max(initial=0.0) for a in range(3)]
+    return 0.5 * float(max(d))
 
 
 def _patch(V, U, vmask, face_tris, n) -> Boundary:
@@ -603,9 +783,11 @@ def boundary_of(result, problem, model=None, settings: BoundarySettings | None =
     if result.method == "forward":
         n_d = int(result.settings.get("n_d", 0))
         if n_d >= 3 and n_d % 2 == 1 and settings.n == BoundarySettings.n:
-            settings = BoundarySettings(n=n_d, enabled=settings.enabled)
+            settings = BoundarySettings(n=n_d, enabled=settings.enabled, fold_n=settings.fold_n)
         known = (result.u, result.points)
     model = model or StaticModel(problem)
-    b = boundary(model, settings, executor=executor, problem=problem, known=known)
+    dets = result.arrays.get("map_det_A")  # forward-backward's configurations: det A's sign shows a fold
+    samples = (result.u, dets) if dets is not None and len(dets) == result.n_points else None
+    b = boundary(model, settings, executor=executor, problem=problem, known=known, samples=samples)
     b.check_points(result.points)
     return b

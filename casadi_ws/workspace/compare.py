@@ -99,7 +99,7 @@ def compare(a, b, step: float | None = None) -> dict:
 
 def _closed(r):
     b = getattr(r, "boundary", None)
-    return b if b is not None and b.method == "input-faces" and b.closed else None
+    return b if b is not None and b.encloses else None
 
 
 def _volumes(a, b) -> dict:

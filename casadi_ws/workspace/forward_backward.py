@@ -739,7 +739,9 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
             surface = None
             if settings.boundary.enabled and not ex.frontier:
                 t = time.perf_counter()
-                surface = boundary(model, settings.boundary, executor=executor, problem=problem, seeds=ex.seeds)
+                dets = [(c.u, c.maps.get("det_A", np.nan)) for c in ex.reached if c.maps]
+                surface = boundary(model, settings.boundary, executor=executor, problem=problem, seeds=ex.seeds,
+                                   samples=(np.array([d[0] for d in dets]), np.array([d[1] for d in dets])))
                 surface.check_points(np.array([c.p for c in ex.reached]))
                 ex.timings["boundary"] = time.perf_counter() - t
         finally:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..fem.spec import ranged_inputs
 from ..solvers.sensitivity import tip_compliance
 
 __all__ = ["MAPS", "effort", "point_maps"]
@@ -72,8 +73,10 @@ def point_maps(model, q, u, A, fac, G=None) -> dict:
     s = np.linalg.svd(A, compute_uv=False) if A is not None and A.size else np.zeros(1)
     if G is None:
         G = tip_compliance(model, fac)
+    ranged = ranged_inputs(model.u_min, model.u_max)
+    det = float(np.linalg.det(A[:, ranged])) if A is not None and ranged.size == 3 else np.nan
     return {**state_maps(model, q, u), "steerability": float(s.min()),
-            "compliance": float(np.linalg.eigvalsh(0.5 * (G + G.T)).max()), "compliance_matrix": G}
+            "compliance": float(np.linalg.eigvalsh(0.5 * (G + G.T)).max()), "compliance_matrix": G, "det_A": det}
 
 
 def state_maps(model, q, u) -> dict:
@@ -94,9 +97,10 @@ def stack(maps: list[dict], n_u: int) -> dict:
     out["direction"] = np.full((k, 3), np.nan)
     out["states"] = np.full((k, n_u), np.nan)
     out["intensities"] = np.full((k, n_u), np.nan)
+    out["det_A"] = np.full(k, np.nan)  # det dp/du over the 3 inputs with a range: its sign shows a fold
     for i, m in enumerate(maps):
         if m is None:
             continue
         for key in out:
-            out[key][i] = m[key]
+            out[key][i] = m.get(key, np.nan)
     return out

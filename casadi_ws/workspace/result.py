@@ -136,6 +136,14 @@ class WorkspaceResult:
                      f"loaded from a neighbouring point and from rest settles differently: buckling, snap-through or "
                      f"contact that holds); the one reached from rest is reported (docs/methods.md \"One answer per "
                      f"input\")")
+        fold = getattr(self.boundary, "fold", None)
+        if fold:
+            vol = self.measures.get("volume")
+            w.append("the map from inputs to tip folds over itself (det dp/du changes sign; inputs near the fold: "
+                     + ", ".join("(" + ", ".join(f"{x:.3g}" for x in u) + ")" for u in fold.get("inputs", [])[:3])
+                     + "): " + (f"the volume {vol * 1e6:.4g} cm^3 is that of the union of the images of U's grid "
+                                f"cells" + _bounds_words(self.measures) if vol is not None else "no volume")
+                     + " (docs/methods.md \"Folds\")")
         if self.counters.get("stopped_at_max_cells"):
             w.append(f"the exploration stopped at its budget of {self.settings.get('max_cells')} explored cells "
                      f"(--max-cells): the result holds what was verified so far; the same command with --resume "
@@ -313,7 +321,15 @@ def _load_boundary(info, a):
     return Boundary(a["boundary_vertices"], a["boundary_triangles"], a["boundary_u"], info["method"],
                     closed=info["closed"], volume=info["volume"], volume_error=info["volume_error"],
                     area=info["area"], tolerance=info["tolerance"], failed=info.get("failed_nodes", 0),
-                    curve=curve if curve is not None and len(curve) else None, notes=info.get("notes", []))
+                    curve=curve if curve is not None and len(curve) else None, notes=info.get("notes", []),
+                    fold=info.get("fold", {}))
+
+
+def _bounds_words(m: dict) -> str:
+    lo, hi = m.get("volume_lower"), m.get("volume_upper")
+    if lo is not None and hi is not None:
+        return f", between {lo * 1e6:.4g} and {hi * 1e6:.4g} cm^3"
+    return f", at most {hi * 1e6:.4g} cm^3" if hi is not None else ""
 
 
 def failures_text(f: dict) -> str:
