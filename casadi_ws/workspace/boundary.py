@@ -445,11 +445,15 @@ def _surface(nodes, n, samples=None) -> Boundary:
         out = nodes.solve([(0, 1, {})], n)
         return out if isinstance(out, Boundary) else _patch(*out, n)
     faces = two_faces(n_u)
+    # a fold the method's samples (or a forward grid) show already: the grid holds the faces' nodes
+    fold = nodes.fold(samples) if n_u == 3 else {}
+    if fold:
+        return _folded_surface(nodes, n, fold)
     # 4 or more inputs: which faces bound the workspace, and their orientation, from a 3 x 3 sampling
     screen = nodes.solve(faces, n if n_u == 3 else 3)
     if isinstance(screen, Boundary):
         return screen
-    fold = nodes.fold(samples) if n_u == 3 else {}
+    fold = nodes.fold(samples) if n_u == 3 else {}  # and det A at the face nodes
     if fold:
         return _folded_surface(nodes, n, fold)
     keep, flip, notes = _orient(*screen, faces)
@@ -610,7 +614,8 @@ def _grid_nodes(n: int) -> np.ndarray:
 
 def _folded_surface(nodes, n, fold) -> Boundary:
     """3 inputs whose map folds: the union of the images of an m x m x m grid's cells (:mod:`.images`), m the
-    known forward grid's or 2 n - 1; the volume's error from the union through every other node."""
+    known forward grid's if at least ``fold_n``, else ``fold_n``; the volume's error from the union through
+    every other node."""
     m = nodes.known_n if nodes.known_n >= nodes.fold_n else nodes.fold_n
     grid = _grid_nodes(m)
     failed = nodes.sweep(m) if m != nodes.known_n and nodes.problem is not None else nodes.solve_nodes(grid)
@@ -647,6 +652,11 @@ def _folded_surface(nodes, n, fold) -> Boundary:
     if not b.closed:
         b.method, b.volume, b.volume_error = "none", None, None
         b.notes.append("the union's surface does not close: no volume (cell_volume counts the cells)")
+    bad = int(np.count_nonzero(vmask[at]))
+    if bad:
+        b.notes.append(f"{bad} of the surface's {np.count_nonzero(at)} vertices at grid nodes are not admissible "
+                       f"equilibria: the surface bounds the image of U, which is larger than the admissible "
+                       f"workspace there")
     return b
 
 
