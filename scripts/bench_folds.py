@@ -156,7 +156,15 @@ def main():
                             "volume_cm3": b3.volume * 1e6, "fold": b3.fold}
         print("unfolded", data["unfolded"])
     (REPO / "benchmarks" / "folds.json").write_text(json.dumps(data, indent=1, default=float) + "\n")
-    write_section("folds", section(data))
+    f, r = data["runs"]["forward n_d = 9"], data["reference"]
+    out = data["probes"]["2 mm"]["probes"]
+    write_section("folds", section(data), what="Folding workspace volume, SOFA trunk with 3 cables",
+                  command="scripts/bench_folds.py",
+                  figure=f"volume {f['volume_cm3']:.1f} cm³ ±{f['volume_error_cm3']:.1f} "
+                         f"({f['error_vs_reference_pct']:+.1f} % against {r['volume_cm3']:.1f} cm³ at 17³) by forward "
+                         f"n_d = 9 and forward-backward 8 mm; outward probes "
+                         f"{sum(not p['reached'] for p in out if p['counted'] and p['side'] == 'outside')} of "
+                         f"{sum(p['counted'] and p['side'] == 'outside' for p in out)} not reached")
 
 
 def len_interior(m, fb):

@@ -39,17 +39,32 @@ def best_of(fn, repeat: int = 5) -> float:
     return best
 
 
-def write_section(name: str, body: str) -> None:
-    """Replace (or append) the section between the markers of ``name`` in BENCHMARKS.md."""
-    start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"
-    text = BENCHMARKS.read_text() if BENCHMARKS.exists() else "# Benchmarks\n\nWritten by the scripts in `scripts/`; rerun them to refresh a section.\n"
-    block = f"{start}\n{body.rstrip()}\n{end}"
-    if start in text:
-        text = re.sub(re.escape(start) + ".*?" + re.escape(end), lambda _: block, text, flags=re.S)
-    else:
-        text = text.rstrip() + "\n\n" + block + "\n"
-    BENCHMARKS.write_text(text)
-    print(f"wrote section '{name}' of {BENCHMARKS}")
+def write_section(name: str, body: str, figure: str | None = None, what: str | None = None,
+                  command: str | None = None) -> None:
+    """Record a run: append the section ``body`` as a row ``name`` of benchmarks/history.jsonl and rewrite
+    BENCHMARKS.md from it (scripts/benchmarks_md.py). ``figure``: its headline in one line (the table's);
+    ``what`` and ``command`` default to the family's earlier row. The family of ``name`` is that of an
+    earlier row of the same name, else the A/B comparisons' (``fb-ab``) for their names, else ``name``."""
+    import json
+
+    import benchmarks_md
+
+    rows = benchmarks_md.read() if benchmarks_md.HISTORY.exists() else []
+    same = [r for r in rows if r["key"] == name]
+    family = same[-1]["family"] if same else (
+        "fb-ab" if name.startswith(("fb-ab", "fb-admissible", "fb-boundary")) else name)
+    before = [r for r in rows if r["family"] == family]
+    dates = re.findall(r"20\d\d-\d\d-\d\d", body)
+    m = re.search(r"(AMD EPYC|Intel[^,]*|[^,]*CPU[^,]*), (\d+) cores", machine())
+    row = {"key": name, "family": family, "date": max(dates) if dates else time.strftime("%Y-%m-%d"),
+           "what": what or (before[-1]["what"] if before else body.strip().splitlines()[0].lstrip("# ")[:70]),
+           "command": command if command is not None else (before[-1]["command"] if before else ""),
+           "figure": figure or "see its section", "machine": f"{m.group(1)}, {m.group(2)} cores" if m else "",
+           "markdown": body.strip()}
+    with open(benchmarks_md.HISTORY, "a") as f:
+        f.write(json.dumps(row, ensure_ascii=False) + "\n")
+    benchmarks_md.write()
+    print(f"recorded run '{name}' in {benchmarks_md.HISTORY} and rewrote {BENCHMARKS}")
 
 
 def trunk_variant(name: str | None = None, order: int | None = None, res: float | None = None, linear: str = "auto"):

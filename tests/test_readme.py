@@ -193,3 +193,16 @@ def test_the_readmes_counts_of_bad_input_files_are_the_corpus():
     assert m, "the README's sentence on the bad-input corpus moved: update this test"
     assert int(m.group(1)) == len(list((REPO / "tests" / "bad_inputs").glob("*.yaml")))
     assert int(m.group(2)) == len(list((REPO / "tests" / "bad_inputs" / "studies").glob("*.yaml")))
+
+
+def test_benchmarks_md_is_made_from_the_history():
+    """BENCHMARKS.md is scripts/benchmarks_md.py's page of benchmarks/history.jsonl, so the figures it shows
+    are the recorded runs', and every benchmark's latest run has a headline figure, a machine and a date."""
+    sys.path.insert(0, str(REPO / "scripts"))
+    import benchmarks_md
+
+    rows = benchmarks_md.read()
+    assert (REPO / "BENCHMARKS.md").read_text() == benchmarks_md.page(rows), \
+        "BENCHMARKS.md differs from the history: run python scripts/benchmarks_md.py"
+    for r in benchmarks_md.latest(rows):
+        assert r["figure"] and r["machine"] and re.fullmatch(r"20\d\d-\d\d-\d\d", r["date"]), r["key"]
