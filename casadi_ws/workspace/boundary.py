@@ -36,6 +36,7 @@ distance from the true boundary to the triangles: half the coarse surface's larg
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from dataclasses import dataclass, field
 
@@ -71,6 +72,12 @@ class BoundarySettings:
     (odd, >= 5; a forward grid at least as fine is used as it is). Its error estimate is the difference from
     the grid through every other node: on the 3-cable SOFA trunk with 20 N cables, 139.8 cm^3 at 9 (estimate
     36) and 133.4 at 17 (estimate 6.5) (tests/test_folds.py, docs/methods.md "Folds")."""
+    fold_tolerance: float = 0.05
+    """Where the map folds: while the error estimate exceeds this share of the volume, the grid is refined
+    (2 m - 1 nodes per input: the previous grid's nodes and those between), up to ``fold_max``."""
+    fold_max: int = 17
+    """The finest fold grid the refinement goes to (17^3 = 4,913 equilibria: ~70 s on the SOFA trunk with 2
+    workers)."""
 
 
 @dataclass
@@ -428,7 +435,8 @@ def boundary(model, settings: BoundarySettings | None = None, executor=None, pro
         return Boundary(np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros((0, model.n_u)), "none",
                         notes=[f"no boundary surface ({why}): no volume (cell_volume counts the cells)"])
     nodes = _Nodes(model, executor, problem, known, seeds.of() if seeds is not None else {})
-    nodes.fold_n = int(settings.fold_n)
+    nodes.fold_n, nodes.fold_max = int(settings.fold_n), int(settings.fold_max)
+    nodes.fold_tolerance = float(settings.fold_tolerance)
     if nodes.fold_n < 5 or nodes.fold_n % 2 == 0 or 720720 % (nodes.fold_n - 1):
         raise ValueError(f"boundary: fold_n must be odd, >= 5 and n - 1 must divide 720720, got {nodes.fold_n}")
     known_keys = set(nodes.tip)
@@ -617,19 +625,27 @@ def _folded_surface(nodes, n, fold) -> Boundary:
     known forward grid's if at least ``fold_n``, else ``fold_n``; the volume's error from the union through
     every other node."""
     m = nodes.known_n if nodes.known_n >= nodes.fold_n else nodes.fold_n
-    grid = _grid_nodes(m)
-    failed = nodes.sweep(m) if m != nodes.known_n and nodes.problem is not None else nodes.solve_nodes(grid)
     why = (f"det dp/du changes sign over U (the map folds over itself: {_fold_words(fold)}), so the images of "
            f"U's faces are not the workspace's boundary")
-    if failed:
-        return Boundary(np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros((0, nodes.model.n_u)), "none",
-                        failed=failed, fold=fold,
-                        notes=[f"{why}; {failed} of the {m}^3 grid nodes that would bound it did not converge: no "
-                               f"volume (cell_volume counts the cells)"])
-    keys = [_key(s) for s in grid]
-    P = np.array([nodes.tip[k] for k in keys])
-    fine = union_of_images(P, m)
-    coarse = union_of_images(P.reshape(m, m, m, 3)[::2, ::2, ::2].reshape(-1, 3), (m + 1) // 2)
+    coarse, refined = None, []
+    while True:
+        grid = _grid_nodes(m)
+        failed = nodes.sweep(m) if m != nodes.known_n and nodes.problem is not None else nodes.solve_nodes(grid)
+        if failed:
+            return Boundary(np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros((0, nodes.model.n_u)), "none",
+                            failed=failed, fold=fold,
+                            notes=[f"{why}; {failed} of the {m}^3 grid nodes that would bound it did not converge: "
+                                   f"no volume (cell_volume counts the cells)"])
+        keys = [_key(s) for s in grid]
+        P = np.array([nodes.tip[k] for k in keys])
+        fine = union_of_images(P, m)
+        if coarse is None:  # (refined: the previous grid is every other node of this one)
+            coarse = union_of_images(P.reshape(m, m, m, 3)[::2, ::2, ::2].reshape(-1, 3), (m + 1) // 2)
+        error = abs(fine["volume"] - coarse["volume"])
+        if error <= nodes.fold_tolerance * fine["volume"] or 2 * m - 1 > nodes.fold_max:
+            break
+        refined.append(f"{m}^3 ({fine['volume'] * 1e6:.4g} cm^3 +- {error * 1e6:.2g})")
+        coarse, m = fine, 2 * m - 1
     V, T = fine["vertices"], fine["triangles"]
     # vertices at grid nodes carry their inputs and admissibility; where sheets cross there are none
     from scipy.spatial import cKDTree
@@ -645,7 +661,8 @@ def _folded_surface(nodes, n, fold) -> Boundary:
     notes = [f"{why}: the surface is the union of the images of the {(m - 1) ** 3} cells of a {m}^3 grid of U "
              f"(their tetrahedra, {fine['turned_over']} of {fine['tetrahedra']} turned over); the integral of "
              f"|det dp/du| over U, {fine['jacobian_integral'] * 1e6:.4g} cm^3, counts the overlapping sheets "
-             f"twice"]
+             f"twice" + (f"; refined from {', '.join(refined)} whose error estimate was above "
+                         f"{100 * nodes.fold_tolerance:g} % of the volume" if refined else "")]
     b = Boundary(V, T, U, "input-cells", closed=_closed(T), volume=fine["volume"],
                  volume_error=abs(fine["volume"] - coarse["volume"]), area=_area(V, T),
                  tolerance=_grid_tolerance(P.reshape(m, m, m, 3)), violations=vmask, notes=notes, fold=fold)
@@ -793,7 +810,7 @@ def boundary_of(result, problem, model=None, settings: BoundarySettings | None =
     if result.method == "forward":
         n_d = int(result.settings.get("n_d", 0))
         if n_d >= 3 and n_d % 2 == 1 and settings.n == BoundarySettings.n:
-            settings = BoundarySettings(n=n_d, enabled=settings.enabled, fold_n=settings.fold_n)
+            settings = dataclasses.replace(settings, n=n_d)
         known = (result.u, result.points)
     model = model or StaticModel(problem)
     dets = result.arrays.get("map_det_A")  # forward-backward's configurations: det A's sign shows a fold
