@@ -315,7 +315,7 @@ def load_result(directory: str | Path) -> WorkspaceResult:
 def _load_boundary(info, a):
     if not info or "boundary_vertices" not in a:
         return None
-    from .boundary import Boundary
+    from .boundary_data import Boundary
 
     curve = a.get("boundary_curve")
     return Boundary(a["boundary_vertices"], a["boundary_triangles"], a["boundary_u"], info["method"],
