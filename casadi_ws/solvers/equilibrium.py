@@ -74,14 +74,15 @@ class Factorization:
         return getattr(self.lu, "K", None)
 
 
-def tangent_factorization(model, q: np.ndarray, u: np.ndarray) -> Factorization:
-    """A fresh LU of the tangent K at the equilibrium (q, u)."""
+def tangent_factorization(model, q: np.ndarray, u: np.ndarray, single: bool = True) -> Factorization:
+    """A fresh LU of the tangent K at the equilibrium (q, u) (``single``: in single precision where a probe shows
+    it accurate, see :func:`casadi_ws.solvers.linear.factorize`)."""
     K = model.tangent(q, u)
-    return _factorization(K, q, model)
+    return _factorization(K, q, model, single)
 
 
-def _factorization(K, q, model=None) -> Factorization:
-    return Factorization(factorize(K, single=True, pivot_threshold=getattr(model, "pivot_threshold", 0.01),
+def _factorization(K, q, model=None, single: bool = True) -> Factorization:
+    return Factorization(factorize(K, single=single, pivot_threshold=getattr(model, "pivot_threshold", 0.01),
                                    solver=solver_of(model), negatives=designed_negatives(model), inertia=False),
                          q.copy())
 

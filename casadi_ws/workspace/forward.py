@@ -57,10 +57,12 @@ class ForwardSettings:
     store_states: bool = False
     """Keep every point's nodal displacements in the result (n_points x 3n floats)."""
     maps: str = "exact"
-    """``exact``: every point's steerability and compliance from an LU of its own tangent (within 1e-5 of central
-    finite differences of independent equilibria on trunk_2cables, and the same whatever the grid's split
-    among workers; it costs an LU per interpolated point: 2.4x the sweep of trunk_2cables at n_d = 100, where
-    most points are interpolated, BENCHMARKS.md "forward"). ``interpolated``: only the Newton points' LU,
+    """``exact``: every point's steerability and compliance from a double-precision LU of its own tangent, at
+    its state polished by one Newton step (within 1e-5 of central finite differences of independent equilibria
+    on trunk_2cables, and within 1e-10 of each other whatever the grid's split among workers; it costs an LU per
+    interpolated point: 2.4x the sweep of trunk_2cables at n_d = 100, where most points are interpolated,
+    BENCHMARKS.md "forward", and the double LU with the polish +17 % more there). ``interpolated``: only the
+    Newton points' LU,
     linear between them along a line or across
     lines (an LU less per interpolated point; measured up to 8 % off finite differences on trunk_2cables at
     n_d = 11, and 15 % apart between a serial and a 2-worker run, whose Newton points differ)."""
@@ -530,9 +532,15 @@ def _across(model, u, x, nodes, eqs, masks, maps, settings, tol, counters):
 def _lu_maps(model, eq, fac=None) -> dict:
     """The maps at a verified equilibrium from ``fac`` or, without one, a fresh LU of its own tangent: the LU a
     Newton solve ends with may be a chord LU of an earlier iterate or of the point before."""
-    if fac is None or not np.array_equal(fac.q, eq.q):
-        fac = tangent_factorization(model, eq.q, eq.u)
-    A, _, G = sensitivity(model, eq.q, fac, compliance=True)  # one set of solves for both
+    # A double-precision LU, and the maps at the state one Newton step further, refined against its own
+    # tangent. Why: from a single-precision LU refined once the compliance was ~1e-4 off, and a serial and a
+    # 2-worker run of one grid (whose states of a point differ within the tolerance, ~1e-9) 7.8e-5 apart;
+    # refined to round-off, 2.4e-8 apart; at the polished state, 7e-11, whichever path reached the point. The
+    # double LU costs about what the single one and its refinement did (trunk_2cables: 6.4 against 4.8 + 3 ms).
+    if fac is None or not np.array_equal(fac.q, eq.q) or getattr(fac, "K", None) is not None:
+        fac = tangent_factorization(model, eq.q, eq.u, single=False)
+    q = eq.q + model.full(fac.solve(-model.residual(eq.q, eq.u)))
+    A, _, G = sensitivity(model, q, fac, K=model.tangent(q, eq.u), compliance=True, converged=True)
     return point_maps(model, eq.q, eq.u, A, fac, G)
 
 
@@ -676,9 +684,10 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
     t1 = time.perf_counter()
     workers = executor.workers if executor is not None else settings.workers
     workers = max(1, min(int(workers), n // 50 or 1))
+    # format 10: exact maps from a double-precision LU at the polished state (a checkpoint of 9 would mix them)
     fp = fingerprint("forward", model, {k: getattr(settings, k) for k in
                                         ("n_d", "predictor", "reuse_factorization", "krylov", "tol", "max_iter",
-                                         "store_states", "stride", "across", "maps")} | {"workers": workers, "format": 9})
+                                         "store_states", "stride", "across", "maps")} | {"workers": workers, "format": 10})
     run = RunState(checkpoint_dir, "forward", fp, resume, t0)
     try:
         cube = grid_inputs(problem) == problem.n_u and across_planes(problem.n_u, model.n_dof, settings)
