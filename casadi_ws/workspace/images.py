@@ -19,8 +19,10 @@ Also reported, as references a sceptic can check: the sum of the tetrahedra's |v
 |det A| over U for the piecewise-linear map, each point counted once per preimage: an upper bound of the
 volume, equal to it where the map does not fold) and how many tetrahedra are turned over.
 
-Why a mesh boolean and not voxels: the exact union of 24,576 tetrahedra takes 0.01-0.4 s here and has no
-voxel error; a voxelisation fine enough for 1 % costs seconds and gives no surface. Why manifold3d: it is a
+Why a mesh boolean and not voxels: the exact union has no voxel error and gives the surface; with the
+tetrahedra first joined into blocks of one sign (:class:`_Blocks`) it takes 0.3 s for a 17^3 grid's 24,534 on
+tests/test_folds.py's map and 7.4 s on the folded SOFA trunk's (one by one: 27 s on the former). A
+voxelisation fine enough for 1 % would cost seconds as well and give no surface. Why manifold3d: it is a
 maintained library whose booleans are guaranteed to return a closed manifold (the surface's points are then
 checked against it like the faces' surface).
 """
