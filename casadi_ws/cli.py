@@ -448,6 +448,65 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def _solve_parser(sub) -> None:
+    s = sub.add_parser("solve", help="estimate the reachable workspace and write result files and plots")
+    s.add_argument("problem", help="problem YAML file")
+    s.add_argument("--method", choices=["forward", "fb"], default=None,
+                   help="forward (grid of U; the default) or fb (forward-backward, grid of the end-effector space)")
+    s.add_argument("--nd", type=int, default=None, help="forward: values per actuator, n_d^n_u equilibria (11)")
+    s.add_argument("--workers", type=int, default=None, help="parallel processes, forward and fb (1)")
+    s.add_argument("--stride", type=int, default=None,
+                   help="forward: Newton every STRIDE-th point of a grid line, the others interpolated and "
+                        "verified (n_d // 6, or n_d // 10 after a line where interpolation failed often; at most 8; "
+                        "1: Newton everywhere)")
+    s.add_argument("--step", type=float, default=None, help="fb: grid step s_Ed in metres (default: the robot's reach / 48, rounded; 4 mm on the trunk)")
+    s.add_argument("--strategy", choices=["uniform", "relative"], default=None, help="fb: discretisation (uniform)")
+    s.add_argument("--backward", choices=["reduced", "ipopt"], default=None, help="fb: backward solver (reduced)")
+    s.add_argument("--out", required=True, help="output directory")
+    s.add_argument("--overwrite", action="store_true", help="replace the files of an existing output directory")
+    s.add_argument("--store-states", action="store_true", help="keep every point's nodal displacements")
+    s.add_argument("--resume", action="store_true", help="continue the interrupted run whose checkpoint is in --out")
+    s.add_argument("--checkpoint-every", type=float, default=30.0,
+                   help="forward: seconds between checkpoints (forward-backward: every iteration)")
+    s.add_argument("--max-cells", type=int, default=200_000,
+                   help="fb: stop after the iteration in which this many grid cells were explored; the result "
+                        "keeps what was verified and --resume with a larger budget continues (200000)")
+    s.add_argument("--force", action="store_true", help="forward: run even more than 10^8 equilibria")
+    s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on an existing Dask cluster (e.g. tcp://host:8786; workers with --nthreads 1)")
+    s.add_argument("--task-box", default=None, metavar="X0,Y0,Z0,X1,Y1,Z1",
+                   help="a task region (m): summary.json reports the share of it the workspace reaches")
+    s.add_argument("--task-points", default=None, metavar="CSV", help="task points x,y,z (m), instead of a box")
+    s.add_argument("--no-boundary", action="store_true",
+                   help="do not build the boundary surface (the volume is then the cells')")
+    s.set_defaults(func=cmd_solve)
+
+
+def _inverse_parsers(sub) -> None:
+    for name, helptext in (("reach", "cable tensions that bring the tip to a target (inverse model)"),
+                           ("follow", "reach a sequence of targets from a CSV file, each warm-started")):
+        r = sub.add_parser(name, help=helptext)
+        r.add_argument("problem", help="problem YAML file")
+        if name == "reach":
+            r.add_argument("--target", required=True, help="x,y,z in metres")
+            r.add_argument("--compact", action="store_true", help="print the JSON on one line")
+            r.set_defaults(func=cmd_reach)
+        else:
+            r.add_argument("--targets", required=True, help="CSV file of x,y,z rows in metres (header optional)")
+            r.add_argument("--out", required=True, help="output directory")
+            r.add_argument("--overwrite", action="store_true", help="replace the files of an existing directory")
+            r.set_defaults(func=cmd_follow)
+        r.add_argument("--tolerance", type=float, default=1e-6, help="reachable if within this distance (m)")
+        r.add_argument("--regularization", type=float, default=0.0,
+                       help="weight (m^2/N^2) of |u|^2 (reach) or |u - u_previous|^2 (follow)")
+        r.add_argument("--max-du", type=float, default=None,
+                       help="largest change of each input per solve (in its unit: N, m, Pa or m^3)")
+        r.add_argument("--method", choices=("reduced", "ipopt"), default="reduced",
+                       help="reduced: Gauss-Newton in the tensions on verified equilibria (fast; IPOPT where it "
+                            "stalls); ipopt: the full-space NLP over displacements and tensions")
+
+
 def _study_parser(sub) -> None:
     st = sub.add_parser("study", help="design study: workspaces of many designs, the best ones (grid or Optuna)")
     st.add_argument("study", help="study YAML file (docs/studies.md)")
@@ -485,38 +544,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--compact", action="store_true", help="print the JSON on one line")
     e.set_defaults(func=cmd_equilibrium)
 
-    s = sub.add_parser("solve", help="estimate the reachable workspace and write result files and plots")
-    s.add_argument("problem", help="problem YAML file")
-    s.add_argument("--method", choices=["forward", "fb"], default=None,
-                   help="forward (grid of U; the default) or fb (forward-backward, grid of the end-effector space)")
-    s.add_argument("--nd", type=int, default=None, help="forward: values per actuator, n_d^n_u equilibria (11)")
-    s.add_argument("--workers", type=int, default=None, help="parallel processes, forward and fb (1)")
-    s.add_argument("--stride", type=int, default=None,
-                   help="forward: Newton every STRIDE-th point of a grid line, the others interpolated and "
-                        "verified (n_d // 6, or n_d // 10 after a line where interpolation failed often; at most 8; "
-                        "1: Newton everywhere)")
-    s.add_argument("--step", type=float, default=None, help="fb: grid step s_Ed in metres (default: the robot's reach / 48, rounded; 4 mm on the trunk)")
-    s.add_argument("--strategy", choices=["uniform", "relative"], default=None, help="fb: discretisation (uniform)")
-    s.add_argument("--backward", choices=["reduced", "ipopt"], default=None, help="fb: backward solver (reduced)")
-    s.add_argument("--out", required=True, help="output directory")
-    s.add_argument("--overwrite", action="store_true", help="replace the files of an existing output directory")
-    s.add_argument("--store-states", action="store_true", help="keep every point's nodal displacements")
-    s.add_argument("--resume", action="store_true", help="continue the interrupted run whose checkpoint is in --out")
-    s.add_argument("--checkpoint-every", type=float, default=30.0,
-                   help="forward: seconds between checkpoints (forward-backward: every iteration)")
-    s.add_argument("--max-cells", type=int, default=200_000,
-                   help="fb: stop after the iteration in which this many grid cells were explored; the result "
-                        "keeps what was verified and --resume with a larger budget continues (200000)")
-    s.add_argument("--force", action="store_true", help="forward: run even more than 10^8 equilibria")
-    s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
-    s.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="run on an existing Dask cluster (e.g. tcp://host:8786; workers with --nthreads 1)")
-    s.add_argument("--task-box", default=None, metavar="X0,Y0,Z0,X1,Y1,Z1",
-                   help="a task region (m): summary.json reports the share of it the workspace reaches")
-    s.add_argument("--task-points", default=None, metavar="CSV", help="task points x,y,z (m), instead of a box")
-    s.add_argument("--no-boundary", action="store_true",
-                   help="do not build the boundary surface (the volume is then the cells')")
-    s.set_defaults(func=cmd_solve)
+    _solve_parser(sub)
 
     b = sub.add_parser("boundary", help="build the boundary surface, volume and area of an existing result")
     b.add_argument("result", help="result directory")
@@ -541,27 +569,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--problem", default=None, help="the problem file, for the robot at rest (default: summary's)")
     rp.set_defaults(func=cmd_report)
 
-    for name, helptext in (("reach", "cable tensions that bring the tip to a target (inverse model)"),
-                           ("follow", "reach a sequence of targets from a CSV file, each warm-started")):
-        r = sub.add_parser(name, help=helptext)
-        r.add_argument("problem", help="problem YAML file")
-        if name == "reach":
-            r.add_argument("--target", required=True, help="x,y,z in metres")
-            r.add_argument("--compact", action="store_true", help="print the JSON on one line")
-            r.set_defaults(func=cmd_reach)
-        else:
-            r.add_argument("--targets", required=True, help="CSV file of x,y,z rows in metres (header optional)")
-            r.add_argument("--out", required=True, help="output directory")
-            r.add_argument("--overwrite", action="store_true", help="replace the files of an existing directory")
-            r.set_defaults(func=cmd_follow)
-        r.add_argument("--tolerance", type=float, default=1e-6, help="reachable if within this distance (m)")
-        r.add_argument("--regularization", type=float, default=0.0,
-                       help="weight (m^2/N^2) of |u|^2 (reach) or |u - u_previous|^2 (follow)")
-        r.add_argument("--max-du", type=float, default=None,
-                       help="largest change of each input per solve (in its unit: N, m, Pa or m^3)")
-        r.add_argument("--method", choices=("reduced", "ipopt"), default="reduced",
-                       help="reduced: Gauss-Newton in the tensions on verified equilibria (fast; IPOPT where it "
-                            "stalls); ipopt: the full-space NLP over displacements and tensions")
+    _inverse_parsers(sub)
 
     c = sub.add_parser("compare", help="agreement of two result directories (strict cell recall first, Hausdorff, volumes)")
     c.add_argument("a", help="result directory A (e.g. forward)")
