@@ -236,15 +236,16 @@ def _problem_of(result, given):
 
 def cmd_boundary(args) -> int:
     from .io.output import write_outputs
-    from .workspace.boundary import BoundarySettings, boundary_of
+    from .workspace.boundary import KEY_SCALE, BoundarySettings, boundary_of, fold_grid_ok
     from .workspace.measures import measures
     from .workspace.result import load_result
 
     d = _result_dir(args.result)
     if args.n < 3 or args.n % 2 == 0:
         raise UsageError(f"--n: expected an odd integer >= 3, got {args.n}")
-    if args.fold_n < 5 or args.fold_n % 2 == 0 or 720720 % (args.fold_n - 1):
-        raise UsageError(f"--fold-n: expected an odd integer >= 5 (9, 13, 17, ...), got {args.fold_n}")
+    if not fold_grid_ok(args.fold_n):
+        raise UsageError(f"--fold-n: expected an odd integer >= 5 whose n - 1 divides {KEY_SCALE} (5, 7, 9, 11, "
+                         f"13, ...), got {args.fold_n}")
     result = load_result(d)
     problem = _problem_of(result, args.problem)
     result.boundary = boundary_of(result, problem, settings=BoundarySettings(n=args.n, fold_n=args.fold_n))

@@ -127,3 +127,25 @@ def test_a_map_that_wraps_onto_itself_is_joined_without_overlaps():
     assert got["volume"] == pytest.approx(6.0, rel=1e-9)
     assert got["jacobian_integral"] == pytest.approx(9.0, rel=1e-9)
     assert one_by_one == pytest.approx(6.0, rel=1e-3)
+
+
+def test_a_forward_grid_with_excluded_points_is_still_whole():
+    """A forward result reports its inadmissible points apart (excluded_*); boundary_of gives them back with their
+    violations, so the grid is whole (its tetrahedra show the fold) and the surface's vertices say which are
+    not admissible."""
+    from types import SimpleNamespace as NS
+
+    from casadi_ws.workspace.boundary import boundary_of
+
+    U = grid(9)
+    P = folded_tip(U)
+    bad = np.zeros(len(U), dtype=bool)
+    bad[::7] = True
+    result = NS(method="forward", settings={"n_d": 9}, u=U[~bad], points=P[~bad], n_points=int((~bad).sum()),
+                arrays={"excluded_u": U[bad], "excluded_points": P[bad],
+                        "excluded_violations": np.full(bad.sum(), 4, np.int64)},
+                _violations=lambda: np.zeros(int((~bad).sum()), np.int64))
+    b = boundary_of(result, None, model=UNIT_BOX)
+    assert b.method == "input-cells" and b.fold["grid_tetrahedra_negative"] > 0
+    assert abs(b.volume - folded_volume()) < 0.01 * folded_volume()
+    assert np.count_nonzero(b.violations) > 0

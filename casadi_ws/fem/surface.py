@@ -29,7 +29,11 @@ def boundary_faces(mesh) -> np.ndarray:
         idx = [a, b, c] + ([_MID[frozenset((a, b))], _MID[frozenset((b, c))], _MID[frozenset((c, a))]]
                            if quadratic else [])
         local.append(idx)
-    faces = np.concatenate([mesh.tets[:, idx] for idx in local])
+    return unshared(np.concatenate([mesh.tets[:, idx] for idx in local]))
+
+
+def unshared(faces: np.ndarray) -> np.ndarray:
+    """The faces whose corners (the first three columns) no other face has: a set of solids' outer surface."""
     key = np.sort(faces[:, :3], axis=1)
     _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
     return faces[counts[inverse.ravel()] == 1]

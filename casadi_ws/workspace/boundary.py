@@ -48,7 +48,7 @@ from ..solvers.admissible import admissibility
 from ..solvers.equilibrium import CONVERGED, solve_equilibrium, tangent_factorization
 from ..solvers.sensitivity import second_order, sensitivity
 from .boundary_data import Boundary, distance_outside
-from .images import kuhn_tetrahedra, tetrahedron_volumes, union_of_images
+from .images import kuhn_tetrahedra, orientations, union_of_images
 
 __all__ = ["Boundary", "BoundarySettings", "Seeds", "boundary", "boundary_of", "distance_outside", "two_faces"]
 
@@ -174,8 +174,18 @@ def _stacked_Q(Qs: list) -> dict:
     return {"seed_Q": np.array([np.full(shape, np.nan, np.float32) if Q is None else Q for Q in Qs], np.float32)}
 
 
+KEY_SCALE = 720720
+"""Nodes are keyed by their unit coordinates times this (exact for every grid whose n - 1 divides it)."""
+
+
 def _key(s):
-    return tuple(np.rint(np.asarray(s) * 720720).astype(np.int64).tolist())  # exact for n - 1 | 720720
+    return tuple(np.rint(np.asarray(s) * KEY_SCALE).astype(np.int64).tolist())
+
+
+def fold_grid_ok(n: int) -> bool:
+    """Whether n nodes per input can make a fold grid: odd (the grid through every other node is the coarse
+    one), at least 5, and n - 1 dividing :data:`KEY_SCALE` (its nodes keyed exactly)."""
+    return n >= 5 and n % 2 == 1 and KEY_SCALE % (n - 1) == 0
 
 
 class _Box:
@@ -237,9 +247,11 @@ def _solve_nodes(model, us: np.ndarray, seeds: list | None = None):
         if fac is None:
             fac = tangent_factorization(model, eq.q, eq.u)
         # A at every node (one solve with n_u right-hand sides on the LU at hand): its sign is the fold test
-        A, S = sensitivity(model, eq.q, fac)
-        if box.n == 3:
-            dets[k] = np.linalg.det(A[:, box.active])
+        S = None
+        if box.n == 3 or k in wanted:  # (S: only for the nodes others start from, see _starts_of_others)
+            A, S = sensitivity(model, eq.q, fac)
+            if box.n == 3:
+                dets[k] = np.linalg.det(A[:, box.active])
         viol[k] = admissibility(model, eq.q, eq.u, fac).mask
         done.append((u.copy(), eq.q, S if k in wanted else None, None))
     return tips, status, viol, n_fac, dets
@@ -349,11 +361,9 @@ def boundary(model, settings: BoundarySettings | None = None, executor=None, pro
                f"faces" if n_u > MAX_INPUTS else "fewer than two inputs with a range")
         return Boundary(np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros((0, model.n_u)), "none",
                         notes=[f"no boundary surface ({why}): no volume (cell_volume counts the cells)"])
-    nodes = _Nodes(model, executor, problem, known, seeds.of() if seeds is not None else {})
-    nodes.fold_n, nodes.fold_max = int(settings.fold_n), int(settings.fold_max)
-    nodes.fold_tolerance = float(settings.fold_tolerance)
-    if nodes.fold_n < 5 or nodes.fold_n % 2 == 0 or 720720 % (nodes.fold_n - 1):
-        raise ValueError(f"boundary: fold_n must be odd, >= 5 and n - 1 must divide 720720, got {nodes.fold_n}")
+    if not fold_grid_ok(int(settings.fold_n)):
+        raise ValueError(f"boundary: fold_n must be odd, >= 5 and n - 1 must divide {KEY_SCALE}, got {settings.fold_n}")
+    nodes = _Nodes(model, executor, problem, known, seeds.of() if seeds is not None else {}, settings)
     known_keys = set(nodes.tip)
     b = _surface(nodes, n, samples)
     b.counters = {"solved_nodes": len(nodes.used - known_keys), "known_nodes": len(nodes.used & known_keys),
@@ -371,14 +381,14 @@ def _surface(nodes, n, samples=None) -> Boundary:
     # a fold the method's samples (or a forward grid) show already: the grid holds the faces' nodes
     fold = nodes.fold(samples) if n_u == 3 else {}
     if fold:
-        return _folded_surface(nodes, n, fold)
+        return _folded_surface(nodes, fold)
     # 4 or more inputs: which faces bound the workspace, and their orientation, from a 3 x 3 sampling
     screen = nodes.solve(faces, n if n_u == 3 else 3)
     if isinstance(screen, Boundary):
         return screen
     fold = nodes.fold(samples) if n_u == 3 else {}  # and det A at the face nodes
     if fold:
-        return _folded_surface(nodes, n, fold)
+        return _folded_surface(nodes, fold)
     keep, flip, notes = _orient(*screen, faces)
     if n_u > 3:
         notes.append(f"{len(keep)} of {len(faces)} faces of U bound the workspace")
@@ -404,23 +414,27 @@ def _surface(nodes, n, samples=None) -> Boundary:
 class _Nodes:
     """The face nodes' equilibria, each solved once (in parallel over the executor's workers)."""
 
-    def __init__(self, model, executor, problem, known, seeds):
+    def __init__(self, model, executor, problem, known, seeds, settings=None):
         self.model, self.executor, self.problem, self.seeds = model, executor, problem, seeds
+        settings = settings or BoundarySettings()
+        self.fold_n, self.fold_max = int(settings.fold_n), int(settings.fold_max)
+        self.fold_tolerance = float(settings.fold_tolerance)
         self.box = _Box(model)
         self.tip, self.viol, self.det = {}, {}, {}
         self.used = set()  # the nodes of every face asked for
         self.factorizations = 0
-        if known is not None:
-            for u, p in zip(np.asarray(known[0]), np.asarray(known[1])):
+        if known is not None:  # (u, tips[, admissibility violations])
+            viol = known[2] if len(known) > 2 else np.zeros(len(known[0]), dtype=np.int64)
+            for u, p, v in zip(np.asarray(known[0]), np.asarray(known[1]), viol):
                 if np.all(np.isfinite(p)):
                     self.tip[_key(self.box.unit(u))] = np.asarray(p, float)
-                    self.viol[_key(self.box.unit(u))] = 0
+                    self.viol[_key(self.box.unit(u))] = int(v)
         self.known_n = self._known_grid()
 
     def _known_grid(self) -> int:
         """n if the known nodes hold a whole n x n x n grid of U (a forward grid, n odd >= 5), else 0."""
         n = round(len(self.tip) ** (1.0 / 3.0)) if self.box.n == 3 else 0
-        if n < 5 or n % 2 == 0 or (720720 % (n - 1)):
+        if not fold_grid_ok(n):
             return 0
         return n if all(_key(s) in self.tip for s in _grid_nodes(n)) else 0
 
@@ -433,16 +447,13 @@ class _Nodes:
         if self.known_n:
             n = self.known_n
             grid = _grid_nodes(n)
-            P = np.array([self.tip[_key(s)] for s in grid])
-            T = kuhn_tetrahedra(n)
-            v = tetrahedron_volumes(P, T)
-            v = np.where(np.abs(v) > 1e-9 * np.abs(v).max(initial=0.0), v, 0.0)
-            pos, neg = np.count_nonzero(v > 0), np.count_nonzero(v < 0)
+            sign = orientations(np.array([self.tip[_key(s)] for s in grid]), n)
+            pos, neg = np.count_nonzero(sign > 0), np.count_nonzero(sign < 0)
             if pos and neg:
                 out.update(grid_tetrahedra_positive=int(pos), grid_tetrahedra_negative=int(neg))
-                minority = v < 0 if neg <= pos else v > 0
-                where.append(self.box.u(grid[T[minority]].mean(axis=1)))
-        u = [self.box.u(np.array(s)) for s in (np.array(k) / 720720 for k in self.det)]
+                minority = sign == (-1 if neg <= pos else 1)
+                where.append(self.box.u(grid[kuhn_tetrahedra(n)[minority]].mean(axis=1)))
+        u = [self.box.u(np.array(k) / KEY_SCALE) for k in self.det]
         d = list(self.det.values())
         if samples is not None:
             u += list(np.asarray(samples[0], float))
@@ -535,23 +546,26 @@ def _grid_nodes(n: int) -> np.ndarray:
     return np.stack(np.meshgrid(s, s, s, indexing="ij"), axis=-1).reshape(-1, 3)
 
 
-def _folded_surface(nodes, n, fold) -> Boundary:
+def _folded_surface(nodes, fold) -> Boundary:
     """3 inputs whose map folds: the union of the images of an m x m x m grid's cells (:mod:`.images`), m the
-    known forward grid's if at least ``fold_n``, else ``fold_n``; the volume's error from the union through
-    every other node."""
+    known forward grid's if at least ``fold_n`` (every other node of it down to ``fold_max``), else ``fold_n``;
+    the volume's error from the union through every other node."""
     m = nodes.known_n if nodes.known_n >= nodes.fold_n else nodes.fold_n
+    while m > nodes.fold_max and fold_grid_ok((m + 1) // 2) and (m + 1) // 2 >= nodes.fold_n:
+        m = (m + 1) // 2  # a finer forward grid's nodes, every other one: the boolean's cost grows as m^3
     why = (f"det dp/du changes sign over U (the map folds over itself: {_fold_words(fold)}), so the images of "
            f"U's faces are not the workspace's boundary")
     coarse, refined = None, []
     while True:
         grid = _grid_nodes(m)
-        failed = nodes.sweep(m) if m != nodes.known_n and nodes.problem is not None else nodes.solve_nodes(grid)
+        keys = [_key(s) for s in grid]
+        known = all(k in nodes.tip for k in keys)
+        failed = nodes.sweep(m) if not known and nodes.problem is not None else nodes.solve_nodes(grid)
         if failed:
             return Boundary(np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros((0, nodes.model.n_u)), "none",
                             failed=failed, fold=fold,
                             notes=[f"{why}; {failed} of the {m}^3 grid nodes that would bound it did not converge: "
                                    f"no volume (cell_volume counts the cells)"])
-        keys = [_key(s) for s in grid]
         P = np.array([nodes.tip[k] for k in keys])
         fine = union_of_images(P, m)
         if coarse is None:  # (refined: the previous grid is every other node of this one)
@@ -579,7 +593,7 @@ def _folded_surface(nodes, n, fold) -> Boundary:
              f"twice" + (f"; refined from {', '.join(refined)} whose error estimate was above "
                          f"{100 * nodes.fold_tolerance:g} % of the volume" if refined else "")]
     b = Boundary(V, T, U, "input-cells", closed=_closed(T), volume=fine["volume"],
-                 volume_error=abs(fine["volume"] - coarse["volume"]), area=_area(V, T),
+                 volume_error=error, area=_area(V, T),
                  tolerance=_grid_tolerance(P.reshape(m, m, m, 3)), violations=vmask, notes=notes, fold=fold)
     if not b.closed:
         b.method, b.volume, b.volume_error = "none", None, None
@@ -726,7 +740,11 @@ def boundary_of(result, problem, model=None, settings: BoundarySettings | None =
         n_d = int(result.settings.get("n_d", 0))
         if n_d >= 3 and n_d % 2 == 1 and settings.n == BoundarySettings.n:
             settings = dataclasses.replace(settings, n=n_d)
-        known = (result.u, result.points)
+        # the excluded (inadmissible) points too: they are equilibria of U's grid, and the grid is whole with them
+        ex = result.arrays
+        known = (np.vstack([result.u, np.asarray(ex.get("excluded_u", np.zeros((0, result.u.shape[1]))))]),
+                 np.vstack([result.points, np.asarray(ex.get("excluded_points", np.zeros((0, 3))))]),
+                 np.concatenate([result._violations(), np.asarray(ex.get("excluded_violations", []), np.int64)]))
     model = model or StaticModel(problem)
     dets = result.arrays.get("map_det_A")  # forward-backward's configurations: det A's sign shows a fold
     samples = (result.u, dets) if dets is not None and len(dets) == result.n_points else None

@@ -33,7 +33,9 @@ import itertools
 
 import numpy as np
 
-__all__ = ["folded_share", "kuhn_tetrahedra", "tetrahedron_volumes", "union_of_images"]
+from ..fem.surface import _FACES as TET_FACES, components, unshared
+
+__all__ = ["folded_share", "kuhn_tetrahedra", "orientations", "tetrahedron_volumes", "union_of_images"]
 
 RELATIVE_DEGENERATE = 1e-12
 """A tetrahedron whose image's |volume| is below this share of the largest is left out of the union: it adds
@@ -64,12 +66,22 @@ def tetrahedron_volumes(P, T) -> np.ndarray:
     return np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a)) / 6.0
 
 
+def orientations(P, n: int) -> np.ndarray:
+    """The sign (+1, -1, or 0 where flat: below :data:`RELATIVE_DEGENERATE` of the largest) of each of the grid's
+    tetrahedra's images (:func:`kuhn_tetrahedra` order)."""
+    v = tetrahedron_volumes(P, kuhn_tetrahedra(n))
+    return np.where(np.abs(v) > RELATIVE_DEGENERATE * np.abs(v).max(initial=0.0), np.sign(v), 0).astype(int)
+
+
+def _turned(sign) -> int:
+    return int(min(np.count_nonzero(sign > 0), np.count_nonzero(sign < 0)))
+
+
 def folded_share(P, n: int) -> tuple[int, int]:
     """(turned over, all) tetrahedra of the grid's image whose orientation is the minority's: 0 where the map
     keeps one sign of det A at this sampling."""
-    v = tetrahedron_volumes(P, kuhn_tetrahedra(n))
-    v = v[np.abs(v) > RELATIVE_DEGENERATE * np.abs(v).max(initial=0.0)]
-    return int(min(np.count_nonzero(v > 0), np.count_nonzero(v < 0))), int(len(v))
+    sign = orientations(P, n)
+    return _turned(sign), int(np.count_nonzero(sign))
 
 
 def union_of_images(P, n: int) -> dict:
@@ -83,44 +95,36 @@ def union_of_images(P, n: int) -> dict:
     P = np.asarray(P, dtype=float)
     T = kuhn_tetrahedra(n)
     v = tetrahedron_volumes(P, T)
-    flat = np.abs(v) <= RELATIVE_DEGENERATE * np.abs(v).max(initial=0.0)
+    sign = orientations(P, n)
     T = np.where((v < 0)[:, None], T[:, [0, 2, 1, 3]], T)
-    sign = np.where(flat, 0, np.sign(v)).astype(int)
     # the boolean works in its own tolerance: centred, unit-sized coordinates
     centre, scale = P.mean(axis=0), max(float(np.ptp(P, axis=0).max()), 1e-300)
     solids = _Blocks((P - centre) / scale, T, sign, n - 1).solids()
     union = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add)
     mesh = union.to_mesh64()
     V = np.asarray(mesh.vert_properties, dtype=float)[:, :3] * scale + centre
-    v = v[~flat]
     V, F = _without_flat_shells(V, np.asarray(mesh.tri_verts, dtype=np.int64))
     return {"vertices": V, "triangles": F,
-            "volume": float(union.volume()) * scale**3, "jacobian_integral": float(np.abs(v).sum()),
-            "turned_over": int(min(np.count_nonzero(v > 0), np.count_nonzero(v < 0))), "tetrahedra": int(len(v)),
-            "pieces": len(solids)}
+            "volume": float(union.volume()) * scale**3, "jacobian_integral": float(np.abs(v[sign != 0]).sum()),
+            "turned_over": _turned(sign), "tetrahedra": int(np.count_nonzero(sign)), "pieces": len(solids)}
 
 
 def _without_flat_shells(V, F):
     """The surface without its shells (connected pieces) that enclose no volume: the boolean leaves sheets of
     zero thickness where tetrahedra nearly coincide (on the folded SOFA trunk, 359 shells of 310 cm^2 beside
     the workspace's one of 1,328 cm^2); they add area and no volume, and would be drawn."""
-    from scipy import sparse
-    from scipy.sparse.csgraph import connected_components
-
     if not len(F):
         return V, F
-    incidence = sparse.csr_matrix((np.ones(F.size), (np.repeat(np.arange(len(F)), 3), F.ravel())),
-                                  shape=(len(F), len(V)))
-    n, label = connected_components(incidence @ incidence.T, directed=False)
+    shells = components(F)
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    vol = np.bincount(label, weights=np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0, minlength=n)
-    keep = np.abs(vol) > 1e-9 * np.abs(vol).sum()
-    F = F[keep[label]]
+    each = np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
+    vol = np.array([each[s].sum() for s in shells])
+    F = F[np.concatenate([s for s, v in zip(shells, vol) if abs(v) > 1e-9 * np.abs(vol).sum()])]
     used = np.unique(F)
     return V[used], np.searchsorted(used, F)
 
 
-_FACES = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+_FACES = np.array(TET_FACES)
 """A tetrahedron's faces, outward where its volume is positive."""
 
 
@@ -167,9 +171,7 @@ class _Blocks:
 
         if len(tets) == 1:
             return self._mesh(self.X[self.T[tets[0]]], _FACES)
-        F = self.T[tets][:, _FACES].reshape(-1, 3)
-        _, face_id, count = np.unique(np.sort(F, axis=1), axis=0, return_inverse=True, return_counts=True)
-        surface = F[count[face_id.ravel()] == 1]
+        surface = unshared(self.T[tets][:, _FACES].reshape(-1, 3))
         used = np.unique(surface)
         local = np.searchsorted(used, surface).astype(np.int32)
         X = np.asfortranarray(self.X[used])
