@@ -9,7 +9,7 @@ __all__ = ["TangentProducts", "bounded_step", "closest_to_box", "curvature", "di
            "limited_step", "second_order", "sensitivity", "tip_compliance"]
 
 
-def sensitivity(model, q, fac, K=None, compliance: bool = False, converged: bool = False) -> tuple:
+def sensitivity(model, q, fac, K=None, compliance: bool = False, joint: bool = False) -> tuple:
     """(A, S): A = C K^-1 H^T (3 x n_u), S = K^-1 H^T = dq/du on the free dofs (n_free x n_u); with
     ``compliance``, (A, S, G), G = C K_f^-1 C^T the tip's compliance (:func:`casadi_ws.workspace.maps.point_maps`)
     for the matrix K_f that ``fac`` factorised, solved with S's solves (the factors are read once for both). A
@@ -20,8 +20,8 @@ def sensitivity(model, q, fac, K=None, compliance: bool = False, converged: bool
     ``K``: the tangent at q, when ``fac`` was computed near q but not at it: iterative refinement then
     brings S to K's own (an LU one Newton iterate away leaves A ~1 % off; the predictors built on S need
     it closer, see :func:`curvature`). Without it, a single-precision ``fac`` is refined against its own
-    matrix (its round-off leaves A 0.4-2 % off on the trunk; after two steps, ~1e-6). ``converged``: refined
-    until the corrections reach round-off (:func:`_converged`; the maps a forward result reports).
+    matrix (its round-off leaves A 0.4-2 % off on the trunk; after two steps, ~1e-6). ``joint`` (with ``K``):
+    one step that refines S and G together against K instead (:func:`_joint`; the forward maps).
     """
     H = model.actuation_matrix(q)  # (n_u, n_free), H = -dL/dq
     if not model.n_u:
@@ -36,9 +36,9 @@ def sensitivity(model, q, fac, K=None, compliance: bool = False, converged: bool
         S, Y = X[:, :n_u], X[:, n_u:]
     else:
         S = fac.solve(HT)
+    if joint and K is not None:
+        return _joint(model, q, fac, K, HT, S, CT if compliance else None, Y if compliance else None)
     K, steps = _refinement(fac, K)
-    if converged and K is not None:
-        return _converged(model, q, fac, K, HT, S, CT if compliance else None, Y if compliance else None)
     for k in range(steps):
         if compliance and k == 0 and kept is not None:
             D = fac.solve(np.hstack([HT - K @ S, CT - kept @ Y]))
@@ -51,26 +51,14 @@ def sensitivity(model, q, fac, K=None, compliance: bool = False, converged: bool
     return (model.C_free @ S, S, model.C_free @ Y) if compliance else (model.C_free @ S, S)
 
 
-def _converged(model, q, fac, K, HT, S, CT, Y, rtol=1e-12, max_steps=8):
-    """:func:`sensitivity`'s (A, S[, G]) refined until the corrections are below ``rtol`` of the solution or stop
-    shrinking: the
-    maps a result reports are then its state's, whatever LU precision or path got there. Why: after one
-    refinement step a single-precision LU left the compliance 1e-4 off, so a serial and a 2-worker run of one
-    forward grid differed by 7.8e-5 at the same points (positions: 6.5e-11 m); each step contracts the error
-    ~1e-4, so 2-3 steps reach round-off."""
+def _joint(model, q, fac, K, HT, S, CT, Y):
+    """:func:`sensitivity`'s (A, S[, G]) with one refinement step of S and G together against ``K``. Why: the
+    forward maps take a double-precision LU of the tangent one Newton step before the state they are wanted at
+    (~1e-9 away), and one step takes the error of both to round-off; the single-precision path refines G only
+    once, ~1e-4 off, which put a serial and a 2-worker run's compliances 8e-5 apart."""
     B = HT if CT is None else np.hstack([HT, CT])
     X = S if CT is None else np.hstack([S, Y])
-    last = np.inf
-    # a double-precision LU of a matrix within ~1e-9 of K (a state one Newton step away) leaves an error that one
-    # step takes to round-off; a single-precision one contracts by ~0.02 per step (trunk_2cables)
-    for _ in range(max_steps if getattr(fac, "K", None) is not None else 1):
-        D = fac.solve(B - K @ X)
-        X = X + D
-        d = np.abs(D).max()
-        # done at rtol, or where the corrections stop shrinking: the residual's round-off (eps |K| |X|) is reached
-        if d <= rtol * max(np.abs(X).max(), 1e-300) or d > 0.5 * last:
-            break
-        last = d
+    X = X + fac.solve(B - K @ X)
     n_u = HT.shape[1]
     S = np.ascontiguousarray(_taut(model, q, fac, X[:, :n_u]))
     return (model.C_free @ S, S) if CT is None else (model.C_free @ S, S, model.C_free @ X[:, n_u:])

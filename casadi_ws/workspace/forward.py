@@ -57,15 +57,14 @@ class ForwardSettings:
     store_states: bool = False
     """Keep every point's nodal displacements in the result (n_points x 3n floats)."""
     maps: str = "exact"
-    """``exact``: every point's steerability and compliance from a double-precision LU of its own tangent, at
-    its state polished by one Newton step (within 1e-5 of central finite differences of independent equilibria
-    on trunk_2cables, and within 1e-10 of each other whatever the grid's split among workers; it costs an LU per
-    interpolated point: 2.4x the sweep of trunk_2cables at n_d = 100, where most points are interpolated,
-    BENCHMARKS.md "forward", and the double LU with the polish +17 % more there). ``interpolated``: only the
-    Newton points' LU,
-    linear between them along a line or across
-    lines (an LU less per interpolated point; measured up to 8 % off finite differences on trunk_2cables at
-    n_d = 11, and 15 % apart between a serial and a 2-worker run, whose Newton points differ)."""
+    """``exact``: every point's steerability and compliance from a double-precision LU of its own tangent, at its
+    state polished by one Newton step (within 1e-5 of central finite differences of independent equilibria on
+    trunk_2cables, and within 1e-10 of each other whatever the grid's split among workers). It costs an LU per
+    interpolated point: 2.4x the sweep of trunk_2cables at n_d = 100, where most points are interpolated, and
+    the double LU with the polish +17 % more there (BENCHMARKS.md "forward"). ``interpolated``: exact maps at
+    the Newton points only, linear between them along a line or across lines (an LU less per interpolated
+    point; measured up to 8 % off finite differences on trunk_2cables at n_d = 11, and 15 % apart between a
+    serial and a 2-worker run, whose Newton points differ)."""
     workers: int = 1
     """Processes sweeping slices of the grid in parallel, each with its own model."""
     progress: bool = True
@@ -540,7 +539,7 @@ def _lu_maps(model, eq, fac=None) -> dict:
     if fac is None or not np.array_equal(fac.q, eq.q) or getattr(fac, "K", None) is not None:
         fac = tangent_factorization(model, eq.q, eq.u, single=False)
     q = eq.q + model.full(fac.solve(-model.residual(eq.q, eq.u)))
-    A, _, G = sensitivity(model, q, fac, K=model.tangent(q, eq.u), compliance=True, converged=True)
+    A, _, G = sensitivity(model, q, fac, K=model.tangent(q, eq.u), compliance=True, joint=True)
     return point_maps(model, eq.q, eq.u, A, fac, G)
 
 
@@ -670,6 +669,8 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
         settings.n_d = int(n_d)
     if settings.n_d < 1:
         raise ValueError(f"n_d must be >= 1, got {settings.n_d}")
+    if settings.maps not in ("exact", "interpolated"):
+        raise ValueError(f"maps must be 'exact' or 'interpolated', got {settings.maps!r}")
     t0 = time.perf_counter()
     model = model or StaticModel(problem)
     t_model = time.perf_counter() - t0
