@@ -158,6 +158,9 @@ def cmd_solve(args) -> int:
             setattr(args, key, problem.workspace.get(key, default))
     if args.workers < 1:
         raise UsageError(f"--workers: expected an integer >= 1, got {args.workers}")
+    if args.shapes is not None and args.shapes < 0:
+        raise UsageError(f"--shapes: expected an integer >= 0 (points whose deformed robot the report draws), "
+                         f"got {args.shapes}")
     task = _task(args, problem)
     if args.method == "forward":
         from .workspace.forward import ForwardSettings, forward
@@ -208,7 +211,7 @@ def cmd_solve(args) -> int:
 
     try:
         measure(result, problem, not args.no_boundary, args.step, task)
-        write_outputs(result, problem, out, args.quiet)
+        write_outputs(result, problem, out, args.quiet, shapes=args.shapes)
     except KeyboardInterrupt:  # after the run: its result files may be incomplete
         print(f"casadi-ws: interrupted while writing the results into {out}; some files may be missing: run the "
               f"same command with --overwrite to compute them again", file=sys.stderr)
@@ -466,6 +469,9 @@ def _solve_parser(sub) -> None:
     s.add_argument("--out", required=True, help="output directory")
     s.add_argument("--overwrite", action="store_true", help="replace the files of an existing output directory")
     s.add_argument("--store-states", action="store_true", help="keep every point's nodal displacements")
+    s.add_argument("--shapes", type=int, default=None, metavar="N",
+                   help="the report draws the deformed robot at N points spread over the workspace, solved again "
+                        "after the run where it kept no states (200; 0: none)")
     s.add_argument("--resume", action="store_true", help="continue the interrupted run whose checkpoint is in --out")
     s.add_argument("--checkpoint-every", type=float, default=30.0,
                    help="forward: seconds between checkpoints (forward-backward: every iteration)")

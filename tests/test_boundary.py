@@ -413,24 +413,31 @@ def test_only_the_face_nodes_another_starts_from_get_their_sensitivities():
 
 
 def test_clicking_a_point_shows_its_inputs_and_the_robot_deformed_there(tmp_path):
+    """Three pages of one grid: the run's own states; states solved again after a run that kept none (a subset:
+    a point outside it draws the nearest one's, naming it); no states at all."""
+    from casadi_ws.io.output import write_outputs
     from casadi_ws.io.report import write_report
     from casadi_ws.workspace.forward import ForwardSettings, forward
 
     pb = small_trunk(n_cables=2)
     kept = forward(pb, settings=ForwardSettings(n_d=4, progress=False, store_states=True))
     bare = forward(pb, settings=ForwardSettings(n_d=4, progress=False))
-    pages = [write_report(r, tmp_path / f"{name}.html", pb.mesh) for name, r in (("kept", kept), ("bare", bare))]
+    write_outputs(bare, pb, tmp_path / "solved", shapes=6)
+    assert bare.counters["shapes"] == 6  # every picked point re-solved to its reported tip
+    pages = [write_report(kept, tmp_path / "kept.html", pb.mesh), tmp_path / "solved" / "report.html",
+             tmp_path / "solved" / "report.html", write_report(bare, tmp_path / "none.html", pb.mesh)]
     exe = _browser()
     if exe is None:
         pytest.skip("no chromium on this machine (make test installs Debian's chromium with apt; it failed)")
     from playwright.sync_api import sync_playwright
 
-    k = 10
+    # the six points the solved page holds are 0, 3, 6, 9, 12, 15 (spread over 16): 10 is not one of them
+    clicks = [10, 9, 10, 10]
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=exe, args=["--use-angle=swiftshader",
                                                                "--enable-unsafe-swiftshader", "--no-sandbox"])
         seen = []
-        for page_file in pages:
+        for page_file, k in zip(pages, clicks):
             page = browser.new_page(viewport={"width": 1280, "height": 720})
             errors = []
             page.on("pageerror", lambda e: errors.append(str(e)))
@@ -444,15 +451,24 @@ def test_clicking_a_point_shows_its_inputs_and_the_robot_deformed_there(tmp_path
             robot = page.evaluate("""() => { const t = document.getElementById('workspace').data.find(
                 t => t.name === 'robot at the clicked point'); return t ? [t.visible, Array.from(t.x),
                 Array.from(t.y), Array.from(t.z)] : null; }""")
-            seen.append((text, robot, errors))
+            assert not errors
+            seen.append((text, robot))
             page.close()
         browser.close()
-    (text, robot, errors), (bare_text, bare_robot, bare_errors) = seen
-    assert not errors and not bare_errors
-    assert f"Point {k}" in text and "long0 (N)" in text and "admissible" in text and "drawn" in text
-    # the drawn robot's tip is the clicked point (the end effector is its tip node), away from the rest shape
-    V = np.array(robot[1:], float).T
-    assert robot[0] is True and np.linalg.norm(V - kept.points[k] * 1e3, axis=1).min() < 1e-3
-    assert np.linalg.norm(kept.points[k] - kept.rest_tip) > 5e-3
-    # without kept states the page says how to get the robot, and draws none
-    assert bare_robot is None and "--store-states" in bare_text and "long90 (N)" in bare_text
+
+    def drawn_at(robot, point):
+        """The drawn robot's tip is ``point`` (the end effector is its tip node)."""
+        V = np.array(robot[1:], float).T
+        return robot[0] is True and np.linalg.norm(V - point * 1e3, axis=1).min() < 1e-3
+
+    (text, robot), (text_s, robot_s), (text_n, robot_n), (bare_text, bare_robot) = seen
+    assert "Point 10" in text and "long0 (N)" in text and "admissible" in text and "drawn (orange)" in text
+    assert drawn_at(robot, kept.points[10]) and np.linalg.norm(kept.points[10] - kept.rest_tip) > 5e-3
+    assert "Point 9" in text_s and "drawn (orange)" in text_s and "at point" not in text_s
+    assert drawn_at(robot_s, bare.points[9])
+    # point 10's nearest held point is 9 or 6 or 12 or 15 or 3 or 0: the page names it and draws it
+    near = min((0, 3, 6, 9, 12, 15), key=lambda j: np.linalg.norm(bare.points[j] - bare.points[10]))
+    assert f"at point {near}," in text_n and "the page holds the shapes of 6 of 16 points" in text_n
+    assert drawn_at(robot_n, bare.points[near])
+    # without states the page says where to get the robot, and draws none
+    assert bare_robot is None and "write_outputs" in bare_text and "long90 (N)" in bare_text

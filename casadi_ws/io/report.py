@@ -5,10 +5,11 @@ The page shows the robot at rest (its outer surface), its obstacles, the workspa
 compliance, tilt, contact with obstacles, u1..un), with
 the summary's numbers beside it. plotly.js is embedded in the file (~4.6 MB), so it opens anywhere.
 
-Clicking a point shows its tip, inputs and intensities (with units), contact force and admissibility, and, where
-the run kept its states (``--store-states``), the robot deformed there: the boundary surface's vertices of up to
-:data:`MAX_SHAPES` points, float32 in base64 (measured: trunk_2cables at n_d = 21, 441 points, 5.1 MB without
-states, 6.9 MB with 200 shapes).
+Clicking a point shows its tip, inputs and intensities (with units), contact force and admissibility, and the robot
+deformed there: the boundary surface's vertices of up to :data:`MAX_SHAPES` points, float32 in base64, from the
+states the run kept (``--store-states``) or else solved again after the run (:func:`casadi_ws.io.output.write_outputs`);
+a point outside that subset shows the nearest one's, saying so (measured: trunk_2cables at n_d = 21, 441 points,
+5.1 MB without shapes, 6.9 MB with 200).
 """
 
 from __future__ import annotations
@@ -117,16 +118,35 @@ MAX_SHAPES = 200
 """Most points whose deformed robot the page holds (evenly spread over the points where there are more)."""
 
 
-def _shapes(result, mesh):
+def shape_points(result, limit: int = MAX_SHAPES) -> np.ndarray:
+    """The indices of the points whose deformed robot the page draws: ``limit`` spread evenly over the points
+    (in the order the run reports them), or all of them where there are fewer."""
+    n = result.n_points
+    if not n or limit <= 0:
+        return np.zeros(0, dtype=int)
+    return np.unique(np.linspace(0, n - 1, min(limit, n)).round().astype(int))
+
+
+def _shapes(result, mesh, states=None):
     """(indices of the points, their deformed boundary vertices in mm as float32 (k, v, 3), the vertices' mesh
-    nodes) where the result kept its states (``--store-states``), else None."""
-    if mesh is None or result.states is None or not result.n_points:
+    nodes): from ``states`` = (indices, nodal states) where given (solved again after the run,
+    :func:`casadi_ws.workspace.states.states_at`), else where the run kept its states (``--store-states``),
+    else None."""
+    if mesh is None or not result.n_points:
         return None
+    if states is None:
+        if result.states is None:
+            return None
+        pick = shape_points(result)
+        Q = np.asarray(result.states)[pick]
+    else:
+        pick, Q = states
+        if not len(pick):
+            return None
     nodes = np.unique(boundary_faces(mesh)[:, :3])
-    pick = np.unique(np.linspace(0, result.n_points - 1, min(MAX_SHAPES, result.n_points)).round().astype(int))
     X = np.asarray(mesh.nodes, float)[nodes]
-    Q = np.asarray(result.states)[pick][:, : 3 * mesh.n_nodes].reshape(len(pick), -1, 3)[:, nodes]
-    return pick, ((X[None] + Q) * MM).astype(np.float32), nodes
+    Q = np.asarray(Q)[:, : 3 * mesh.n_nodes].reshape(len(pick), -1, 3)[:, nodes]
+    return np.asarray(pick, dtype=int), ((X[None] + Q) * MM).astype(np.float32), nodes
 
 
 def _details(result, mesh, shapes=None) -> dict:
@@ -142,7 +162,7 @@ def _details(result, mesh, shapes=None) -> dict:
            "intensities": np.asarray(maps["intensities"], float).round(9).tolist(),
            "tip_mm": (np.asarray(result.points) * MM).round(4).tolist(),
            "contact_N": np.asarray(maps["contact"], float).round(6).tolist(),
-           "admissible": [", ".join(decode(int(v))) or "yes" for v in viol]}
+           "admissible": [", ".join(decode(int(v))) or "yes" for v in viol], "max_shapes": MAX_SHAPES}
     if shapes is not None:
         pick, V, nodes = shapes
         out["shape_of"] = {int(i): k for k, i in enumerate(pick)}
@@ -171,7 +191,17 @@ _CLICK_JS = """
     rows += '<tr><th>contact</th><td>' + d.contact_N[k].toPrecision(3) + ' N</td></tr>';
     rows += '<tr><th>admissible</th><td>' + d.admissible[k] + '</td></tr>';
     var robot = gd.data.findIndex(function (t) { return t.name === 'robot at the clicked point'; });
-    var s = d.shape_of ? d.shape_of[k] : undefined;
+    var s = d.shape_of ? d.shape_of[k] : undefined, at = k;
+    if (robot >= 0 && s === undefined && d.shape_of) {
+      // the page holds a subset of the shapes: draw the nearest point's, and say so
+      var best = Infinity;
+      for (var key in d.shape_of) {
+        var t = d.tip_mm[key], e = d.tip_mm[k];
+        var dist = Math.hypot(t[0] - e[0], t[1] - e[1], t[2] - e[2]);
+        if (dist < best) { best = dist; at = +key; }
+      }
+      s = d.shape_of[at];
+    }
     if (robot >= 0 && s !== undefined) {
       var n = d.shape_vertices, o0 = 3 * s * n;
       // interior nodes are no triangle's corner: placed on a drawn vertex, they leave the view's extent alone
@@ -182,9 +212,10 @@ _CLICK_JS = """
         x[node] = shapes[o]; y[node] = shapes[o + 1]; z[node] = shapes[o + 2];
       }
       Plotly.restyle(gd, {x: [x], y: [y], z: [z], visible: true}, [robot]);
-      rows += '<tr><th>robot</th><td>drawn (orange)</td></tr>';
+      rows += '<tr><th>robot</th><td>' + (at === k ? 'drawn (orange)' : 'drawn (orange) at point ' + at + ', ' + best.toFixed(2)
+        + ' mm away: the page holds the shapes of ' + Object.keys(d.shape_of).length + ' of ' + d.tip_mm.length + ' points') + '</td></tr>';
     } else {
-      rows += '<tr><th>robot</th><td>' + (robot >= 0 ? 'not kept for this point' : 'solve with --store-states to see it') + '</td></tr>';
+      rows += '<tr><th>robot</th><td>not in this page (casadi-ws solve and write_outputs store up to ' + d.max_shapes + ' shapes)</td></tr>';
     }
     document.getElementById('point').innerHTML = '<h3>Point ' + k + '</h3><table id="point-table">' + rows + '</table>';
   }
@@ -241,13 +272,14 @@ def _table(result) -> str:
     return f'<table id="summary">{cells}</table>'
 
 
-def write_report(result, path: str | Path, mesh=None, obstacles=()) -> Path:
+def write_report(result, path: str | Path, mesh=None, obstacles=(), states=None) -> Path:
     """Write the page for ``result`` (and the robot's ``mesh`` at rest and the problem's ``obstacles``, if
-    given) to ``path``."""
+    given) to ``path``; ``states`` = (point indices, their nodal states) gives the deformed robot at those
+    points where the result kept no states (:func:`casadi_ws.io.output.write_outputs` solves them)."""
     import plotly.io as pio
 
     path = Path(path)
-    shapes = _shapes(result, mesh)
+    shapes = _shapes(result, mesh, states)
     fig = _figure(result, mesh, obstacles, shapes)
     plot = pio.to_html(fig, full_html=False, include_plotlyjs=True, div_id="workspace",
                        config={"displaylogo": False, "responsive": True})
@@ -265,7 +297,7 @@ td{{font-variant-numeric:tabular-nums}}</style></head>
 (deg), contact (the force the obstacles exert on the body, N; with obstacles), and each input by its
 actuator's name and unit. Coordinates in mm; the view's up is against gravity.
 Drag to rotate, scroll to zoom. Click a point: its inputs, intensities, contact and admissibility below, and the
-deformed robot where the run kept its states (<code>--store-states</code>; up to {MAX_SHAPES} points).</p>
+deformed robot (stored for up to {MAX_SHAPES} points; elsewhere the nearest of them is drawn, and named).</p>
 <div id="point"></div>
 <script type="application/json" id="points-json">{points_json}</script>
 <script type="application/json" id="summary-json">{html.escape(json.dumps(result.summary(), default=_json_default))}</script>
