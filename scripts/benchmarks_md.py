@@ -1,12 +1,13 @@
-"""BENCHMARKS.md from benchmarks/history.jsonl: today's figure per benchmark, then each one's latest run.
+"""BENCHMARKS.md from benchmarks/history.jsonl: today's figure per benchmark; benchmarks/latest.md: each one's
+latest run in full.
 
 Every run of a benchmark script is one row of the history (``key``, ``family``, ``date``, ``what``,
 ``command``, ``figure``, ``machine`` and the run's ``markdown`` section); :func:`benchlib.write_section`
-appends the row and calls :func:`write`. The page shows, per family, the latest row (by date, then by
+appends the row and calls :func:`write`. The pages show, per family, the latest row (by date, then by
 order in the file); the rows before it stay in the history (``--show KEY`` prints one). A test checks that
-BENCHMARKS.md is what this script makes of the history, so the page cannot drift from the data.
+both pages are what this script makes of the history, so they cannot drift from the data.
 
-    python scripts/benchmarks_md.py            # rewrite BENCHMARKS.md
+    python scripts/benchmarks_md.py            # rewrite BENCHMARKS.md and benchmarks/latest.md
     python scripts/benchmarks_md.py --show fb-ab-issue-63
 """
 
@@ -20,12 +21,14 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 HISTORY = REPO / "benchmarks" / "history.jsonl"
 PAGE = REPO / "BENCHMARKS.md"
+SECTIONS = REPO / "benchmarks" / "latest.md"
 
 INTRO = """# Benchmarks
 
 Speed and accuracy as measured by the scripts in `scripts/` (tests check behaviour, not timings). Each run is a
 row of `benchmarks/history.jsonl`; this page is made from it by `python scripts/benchmarks_md.py`: the
-table gives today's figure per benchmark, the sections below each benchmark's latest run in full. Earlier
+table gives today's figure per benchmark (its name is the key the docs quote), and each links to the
+benchmark's latest run in full (its machine, mesh, settings and every figure) in `benchmarks/latest.md`. Earlier
 runs (A/B comparisons of one commit against another, reruns on other machines) stay in the history:
 `python scripts/benchmarks_md.py --show KEY` (the names the docs quote, e.g. "fb-ab-seeds", are keys). This
 machine is shared: the same code's timings vary by up to
@@ -53,22 +56,36 @@ def _anchor(title: str) -> str:
 
 
 def page(rows: list[dict]) -> str:
-    last = latest(rows)
+    """BENCHMARKS.md: the table of today's figures."""
     lines = [INTRO, "", "## Today's figure per benchmark", "",
              "| benchmark | latest figure | machine, date | command |", "|---|---|---|---|"]
-    for r in last:
-        title = r["markdown"].splitlines()[0].lstrip("# ").strip()
+    seen: dict[str, int] = {}
+    for r in latest(rows):
+        anchor = _anchor(r["markdown"].splitlines()[0].lstrip("# ").strip())
+        seen[anchor] = seen.get(anchor, -1) + 1
+        if seen[anchor]:  # GitHub numbers a repeated heading's anchor
+            anchor = f"{anchor}-{seen[anchor]}"
         older = sum(x["family"] == r["family"] for x in rows) - 1
-        lines.append(f"| [{r['what']}](#{_anchor(title)}){f' ({older} earlier runs)' if older else ''} | "
-                     f"{r['figure']} | {r['machine']}, {r['date']} | "
+        lines.append(f"| [{r['what']}](benchmarks/latest.md#{anchor}) (`{r['family']}`"
+                     f"{f', {older} earlier runs' if older else ''}) | {r['figure']} | {r['machine']}, {r['date']} | "
                      f"{('`' + r['command'] + '`') if r['command'] else '–'} |")
-    for r in last:
+    return "\n".join(lines) + "\n"
+
+
+def sections(rows: list[dict]) -> str:
+    """benchmarks/latest.md: each benchmark's latest run in full."""
+    lines = ["# Benchmarks: each one's latest run", "",
+             "Made from `history.jsonl` by `python scripts/benchmarks_md.py`; today's figures are in "
+             "[BENCHMARKS.md](../BENCHMARKS.md)."]
+    for r in latest(rows):
         lines += ["", r["markdown"].rstrip()]
     return "\n".join(lines) + "\n"
 
 
-def write(path: Path = PAGE, history: Path = HISTORY) -> None:
-    path.write_text(page(read(history)))
+def write(path: Path = PAGE, history: Path = HISTORY, sections_path: Path = SECTIONS) -> None:
+    rows = read(history)
+    path.write_text(page(rows))
+    sections_path.write_text(sections(rows))
 
 
 def main() -> None:
@@ -82,7 +99,7 @@ def main() -> None:
         print(rows[-1]["markdown"])
         return
     write()
-    print(f"wrote {PAGE}")
+    print(f"wrote {PAGE} and {SECTIONS}")
 
 
 if __name__ == "__main__":

@@ -204,5 +204,15 @@ def test_benchmarks_md_is_made_from_the_history():
     rows = benchmarks_md.read()
     assert (REPO / "BENCHMARKS.md").read_text() == benchmarks_md.page(rows), \
         "BENCHMARKS.md differs from the history: run python scripts/benchmarks_md.py"
+    assert (REPO / "benchmarks" / "latest.md").read_text() == benchmarks_md.sections(rows), \
+        "benchmarks/latest.md differs from the history: run python scripts/benchmarks_md.py"
+    assert len((REPO / "BENCHMARKS.md").read_text().splitlines()) < 300
     for r in benchmarks_md.latest(rows):
         assert r["figure"] and r["machine"] and re.fullmatch(r"20\d\d-\d\d-\d\d", r["date"]), r["key"]
+
+
+def test_the_readmes_number_of_drawn_robots_is_the_reports():
+    from casadi_ws.io.report import MAX_SHAPES
+
+    text = " ".join((REPO / "README.md").read_text().split())
+    assert f"the page holds the shapes of up to {MAX_SHAPES} points" in text
