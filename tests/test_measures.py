@@ -114,6 +114,15 @@ def test_volume_area_and_length_each_mean_one_thing():
     three.boundary = _cube_boundary(np.zeros(3), 0.01)
     m = measures(three, step=0.001)
     assert m["volume"] == pytest.approx(1e-6) and m["volume_method"] == "boundary" and "area" not in m
+    # 4 inputs: the same; without a boundary no volume at all (the cells' is cell_volume, never volume)
+    four = WorkspaceResult("forward", rng.uniform(0, 0.01, (80, 3)), rng.uniform(0, 1, (80, 4)),
+                           problem={"u_min": [0, 0, 0, 0], "u_max": [1, 1, 1, 1]})
+    m = measures(four, step=0.001)
+    assert m["volume"] is None and m["cell_volume"] == m["cells"] * 0.001**3 > 0
+    assert "area" not in m and "length" not in m
+    four.boundary = _cube_boundary(np.zeros(3), 0.01)
+    m = measures(four, step=0.001)
+    assert m["volume"] == pytest.approx(1e-6) and m["volume_method"] == "boundary"
 
 
 def test_compare_reports_both_boundary_volumes_and_their_symmetric_difference():

@@ -90,6 +90,8 @@ def test_malformed_yaml_and_wrong_u(tmp_path):
     assert r.returncode == 2 and "malformed YAML: line" in r.stderr
     r = run_cli("equilibrium", REPO / "problems" / "trunk_2cables.yaml", "--u", "1,2,3")
     assert r.returncode == 2 and "has 2 actuator(s), got 3" in r.stderr
+    r = run_cli("solve", REPO / "problems" / "trunk_2cables.yaml", "--shapes", "-1", "--out", p.parent / "x")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--shapes: expected an integer >= 0" in r.stderr
 
 
 def test_numbers_written_without_exponent_sign_are_accepted():
