@@ -504,7 +504,7 @@ class _Nodes:
         for the 9^3 grid (44 s, 2 workers), the sweep 18.6 s."""
         from .forward import ForwardSettings, forward
 
-        fw = forward(self.problem, settings=ForwardSettings(n_d=m, progress=False, maps="interpolated"),
+        fw = forward(self.problem, settings=ForwardSettings(n_d=m, progress=False, maps="none"),
                      model=self.model, executor=self.executor)
         self.factorizations += int(fw.counters.get("factorizations", 0))
         for u, p, v in itertools.chain(zip(fw.u, fw.points, fw._violations()),

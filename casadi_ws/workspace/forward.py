@@ -64,7 +64,9 @@ class ForwardSettings:
     the double LU with the polish +17 % more there (BENCHMARKS.md "forward"). ``interpolated``: exact maps at
     the Newton points only, linear between them along a line or across lines (an LU less per interpolated
     point; measured up to 8 % off finite differences on trunk_2cables at n_d = 11, and 15 % apart between a
-    serial and a 2-worker run, whose Newton points differ)."""
+    serial and a 2-worker run, whose Newton points differ). ``none``: no steerability and compliance at all (NaN;
+    an LU less per Newton point): for sweeps whose maps nobody reads (the seeds of a fold's union or of the
+    orientation ranges)."""
     workers: int = 1
     """Processes sweeping slices of the grid in parallel, each with its own model."""
     progress: bool = True
@@ -409,13 +411,14 @@ def _solve_line(model, us, first, settings, tol, sw: _Sweep, counters):
     return out
 
 
-def _check_line(model, line, exact: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def _check_line(model, line, mode: str = "exact") -> tuple[np.ndarray, np.ndarray]:
     """Admissibility masks of a line's points (0 for points that did not converge), and their maps. Newton
     points get every check, with the pivots of their own LU; a point between two Newton points of the line
     inherits stability and self-penetration from them when both pass those, and gets the cheap checks
     itself. The maps (:mod:`.maps`) come from each point's own LU (``exact``: the Newton points' LU where it was
     taken at the point, else a fresh one); with ``exact`` False, between Newton points steerability and
-    compliance are interpolated linearly from them, the others computed at the point."""
+    compliance are interpolated linearly from them, the others computed at the point; ``none``: neither."""
+    exact = mode == "exact"
     masks = np.zeros(len(line), dtype=np.int64)
     maps = np.full((len(line), len(MAPS) + 2 * model.n_u), np.nan)
     costly = encode(("unstable", "self_penetration"))
@@ -437,14 +440,14 @@ def _check_line(model, line, exact: bool = True) -> tuple[np.ndarray, np.ndarray
     for j, eq in enumerate(line):
         if eq.status != CONVERGED:
             continue
-        if done[j] or exact:
+        if (done[j] or exact) and mode != "none":
             fac = eq.factorization if done[j] and eq.factorization is not None else None
             m = _lu_maps(model, eq, fac)
         else:
             m = state_maps(model, eq.q, eq.u) | {"steerability": np.nan, "compliance": np.nan}
         maps[j] = [m[name] for name in MAPS] + list(m["states"]) + list(m["intensities"])
     for j in np.flatnonzero(~done):
-        if exact or line[j].status != CONVERGED or not anchors.size:
+        if mode != "interpolated" or line[j].status != CONVERGED or not anchors.size:
             continue
         left, right = anchors[anchors < j], anchors[anchors > j]
         a, b = (left[-1] if left.size else right[0]), (right[0] if right.size else left[-1])
@@ -469,7 +472,7 @@ def _solve_plane(model, us, first, settings, tol, sw: _Sweep, counters, L: int):
     for i in newton:
         idx = lines[i]
         line = _solve_line(model, us[idx], first + idx[0], settings, tol, sw, counters)
-        masks[idx], maps[idx] = _check_line(model, line, settings.maps == "exact")
+        masks[idx], maps[idx] = _check_line(model, line, settings.maps)
         for eq in line:
             # checked: the lines between need only its states; a plane's ~250 LUs kept to its end took 12 GB
             # per worker on the 3-cable trunk at n_d = 30
@@ -493,7 +496,7 @@ def _across(model, u, x, nodes, eqs, masks, maps, settings, tol, counters):
         eq = settle(model, solve_equilibrium(model, u, tol=tol, max_iter=settings.max_iter), np.zeros(model.n_dof))
         _count(counters, eq)
         eq.newton = True
-        return eq, *_own_checks(model, eq)
+        return eq, *_own_checks(model, eq, settings.maps)
     nodes = sorted(nodes, key=lambda n: abs(n[0] - x))[:_INTERPOLATION_POINTS]
     xs = np.array([n[0] for n in nodes])
     guess = polynomial_guess(model, xs, [eqs[k].q for _, k in nodes], x)
@@ -509,7 +512,7 @@ def _across(model, u, x, nodes, eqs, masks, maps, settings, tol, counters):
         eq = settled
         _count(counters, eq)
         eq.newton = True
-        return eq, *_own_checks(model, eq)
+        return eq, *_own_checks(model, eq, settings.maps)
     # the solved lines either side (or the nearest one, at the plane's edge) stand in for its costly checks
     lo = [n for n in nodes if n[0] < x]
     hi = [n for n in nodes if n[0] > x]
@@ -520,7 +523,7 @@ def _across(model, u, x, nodes, eqs, masks, maps, settings, tol, counters):
     mask = admissibility(model, eq.q, eq.u, None, inherited=bool(inherit)).mask
     m = _lu_maps(model, eq) if settings.maps == "exact" else state_maps(model, eq.q, eq.u)
     row = np.array([m.get(name, np.nan) for name in MAPS] + list(m["states"]) + list(m["intensities"]))
-    if settings.maps != "exact":
+    if settings.maps == "interpolated":
         a, b = a or b, b or a
         w = 0.0 if a[0] == b[0] else (x - a[0]) / (b[0] - a[0])
         lu_maps = [MAPS.index("steerability"), MAPS.index("compliance")]
@@ -543,7 +546,7 @@ def _lu_maps(model, eq, fac=None) -> dict:
     return point_maps(model, eq.q, eq.u, A, fac, G)
 
 
-def _own_checks(model, eq):
+def _own_checks(model, eq, mode: str = "exact"):
     """Admissibility mask and maps of a Newton-solved point, from its own LU (then dropped: the point is
     kept to the end of its plane, and where the interpolation across lines fails often, a plane's LUs
     took 12 GB per worker)."""
@@ -553,8 +556,8 @@ def _own_checks(model, eq):
     fac = eq.factorization if eq.factorization is not None else tangent_factorization(model, eq.q, eq.u)
     eq.factorization = None
     mask = admissibility(model, eq.q, eq.u, fac).mask
-    m = _lu_maps(model, eq, fac)
-    return mask, np.array([m[name] for name in MAPS] + list(m["states"]) + list(m["intensities"]))
+    m = _lu_maps(model, eq, fac) if mode != "none" else state_maps(model, eq.q, eq.u)
+    return mask, np.array([m.get(name, np.nan) for name in MAPS] + list(m["states"]) + list(m["intensities"]))
 
 
 def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progress=None,
@@ -627,7 +630,7 @@ def sweep(model: StaticModel, us: np.ndarray, settings: ForwardSettings, progres
                     sw.history, sw.fac, sw.start, counters = snapshot
                     raise
                 if P == L:
-                    violations[a:b], maps[a:b] = _check_line(model, line, settings.maps == "exact")
+                    violations[a:b], maps[a:b] = _check_line(model, line, settings.maps)
                 for j, eq in enumerate(line, start=a):
                     tips[j], status[j], residual[j] = eq.tip, eq.status, eq.residual
                     if states is not None and eq.status == CONVERGED:
@@ -669,8 +672,8 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
         settings.n_d = int(n_d)
     if settings.n_d < 1:
         raise ValueError(f"n_d must be >= 1, got {settings.n_d}")
-    if settings.maps not in ("exact", "interpolated"):
-        raise ValueError(f"maps must be 'exact' or 'interpolated', got {settings.maps!r}")
+    if settings.maps not in ("exact", "interpolated", "none"):
+        raise ValueError(f"maps must be 'exact', 'interpolated' or 'none', got {settings.maps!r}")
     t0 = time.perf_counter()
     model = model or StaticModel(problem)
     t_model = time.perf_counter() - t0
@@ -685,10 +688,11 @@ def _forward(problem, n_d, settings, model, checkpoint_dir, resume, executor) ->
     t1 = time.perf_counter()
     workers = executor.workers if executor is not None else settings.workers
     workers = max(1, min(int(workers), n // 50 or 1))
-    # format 10: exact maps from a double-precision LU at the polished state (a checkpoint of 9 would mix them)
+    # format 11: the tip's roll and axis among the maps (10: exact maps from a double-precision LU at the polished
+    # state; a checkpoint of an older format would mix them)
     fp = fingerprint("forward", model, {k: getattr(settings, k) for k in
                                         ("n_d", "predictor", "reuse_factorization", "krylov", "tol", "max_iter",
-                                         "store_states", "stride", "across", "maps")} | {"workers": workers, "format": 10})
+                                         "store_states", "stride", "across", "maps")} | {"workers": workers, "format": 11})
     run = RunState(checkpoint_dir, "forward", fp, resume, t0)
     try:
         cube = grid_inputs(problem) == problem.n_u and across_planes(problem.n_u, model.n_dof, settings)
