@@ -71,6 +71,12 @@ def test_warm_started_grid_matches_cold_solves():
         assert np.linalg.norm(cold.tip - res.points[k]) < 1e-8  # metres
     # the predictor did its job: about one factorisation per point
     assert res.counters["factorizations"] < 2.5 * res.counters["solves"]
+    # without maps: the same points and the LU-free maps, no steerability or compliance
+    bare = forward(pb, settings=ForwardSettings(n_d=6, progress=False, maps="none"), model=model)
+    assert np.abs(bare.points - res.points).max() < 1e-9
+    mb, mr = bare.maps(), res.maps()
+    assert np.all(np.isnan(mb["steerability"])) and np.all(np.isnan(mb["compliance"]))
+    np.testing.assert_allclose(mb["tilt"], mr["tilt"], atol=1e-6)
 
 
 def test_result_round_trip_and_files(tmp_path):
@@ -85,11 +91,13 @@ def test_result_round_trip_and_files(tmp_path):
     assert {"method", "n_points", "n_failed", "time_s", "settings"} <= set(s)
     assert s["n_points"] == 16 and s["settings"]["n_d"] == 4
     csv = np.loadtxt(tmp_path / "points.csv", delimiter=",", skiprows=1)
-    assert csv.shape == (16, 17)
+    assert csv.shape == (16, 21)
     assert (tmp_path / "points.csv").read_text().splitlines()[0] == \
-        "x,y,z,u1,u2,stable,admissible,violations,effort,steerability,compliance,tilt,contact,state1,state2,intensity1,intensity2"
-    np.testing.assert_array_equal(csv[:, 15:17], csv[:, 3:5])  # force control: the intensity is the input
-    assert np.all(csv[:, 12] == 0.0)  # no obstacles: no contact force
+        "x,y,z,u1,u2,stable,admissible,violations,effort,steerability,compliance,tilt,roll,axis_x,axis_y,axis_z," \
+        "contact,state1,state2,intensity1,intensity2"
+    np.testing.assert_array_equal(csv[:, 19:21], csv[:, 3:5])  # force control: the intensity is the input
+    assert np.all(csv[:, 16] == 0.0)  # no obstacles: no contact force
+    np.testing.assert_allclose(np.linalg.norm(csv[:, 13:16], axis=1), 1.0, rtol=1e-5)  # the tip's axis: unit
     np.testing.assert_array_equal(csv[:, 5:8], np.column_stack([np.ones(16), np.ones(16), np.zeros(16)]))
     vtu = pv.read(tmp_path / "points.vtu")
     assert vtu.n_points == 16 and "u2" in vtu.point_data
