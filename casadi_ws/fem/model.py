@@ -498,6 +498,14 @@ class StaticModel:
         """End-effector position p_E = C q + p_E(0)."""
         return self.C @ q + self.p0
 
+    @property
+    def tip_frame(self):
+        """The tip's frame (:class:`casadi_ws.fem.frame.TipFrame`): from the problem's three ``frame`` points, else
+        the tip elements' rotation."""
+        from .frame import TipFrame
+
+        return self.cache.get("tip_frame", lambda: TipFrame(self, getattr(self.spec, "tip_frame", None)))
+
     def full(self, q_free: np.ndarray) -> np.ndarray:
         q = np.zeros(self.n_dof)
         q[self.free] = q_free

@@ -136,6 +136,9 @@ class ModelSpec:
     self_contact_auto: AutoSelfContact | None = None
     """Self-contact wherever the boundary meets itself (None: off; the ``self_penetration`` audit then
     refuses states that pass through themselves)."""
+    tip_frame: np.ndarray | None = None
+    """Three points (3, 3) at the tip whose plane carries its orientation (:mod:`casadi_ws.fem.frame`); None:
+    the tip elements' rotation."""
     terms: list = field(default_factory=list)
     """Terms added to those the fields above make (:mod:`casadi_ws.fem.terms`): a problem file's ``springs``
     and ``pressure_loads``, or a user's own :class:`casadi_ws.fem.terms.Term`. Each model works on a copy."""

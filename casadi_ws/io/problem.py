@@ -535,24 +535,39 @@ def tip_centre(mesh: Mesh, axis: str = "+z") -> np.ndarray:
 _AXES = ("x", "y", "z", "+x", "+y", "+z", "-x", "-y", "-z")
 
 
-def _read_end_effector(r: _Reader, ee, mesh: Mesh) -> np.ndarray:
+def _read_end_effector(r: _Reader, ee, mesh: Mesh) -> tuple[np.ndarray, np.ndarray | None]:
     """``end_effector``: ``tip`` (the +z end), ``{tip: {axis: -x}}``, a point ``[x, y, z]`` inside the mesh, or
     ``{point: [x, y, z], snap: distance}`` (a point up to ``snap`` metres outside, moved onto the mesh: a
-    SOFA effector often sits on the surface, a rounding away from it)."""
-    snap = 0.0
+    SOFA effector often sits on the surface, a rounding away from it). A mapping may add ``frame``: three
+    points at the tip whose plane carries its orientation (:mod:`casadi_ws.fem.frame`), or ``tip`` (with
+    ``tip``: the end face's centre and two of its nodes a quarter turn apart). Returns (point, frame or None)."""
+    snap, frame = 0.0, None
     if ee == "tip":
-        return tip_centre(mesh)
+        return tip_centre(mesh), None
     if isinstance(ee, dict) and "tip" in ee:
-        r.mapping(ee, "end_effector", {"tip"})
+        r.mapping(ee, "end_effector", {"tip", "frame"})
         t = r.mapping(ee["tip"], "end_effector.tip", {"axis"})
         axis = str(t.get("axis", "+z"))
         if axis not in _AXES:
             r.fail("end_effector.tip.axis", f"expected one of {', '.join(_AXES)}, got {axis!r}")
-        return tip_centre(mesh, axis)
+        point = tip_centre(mesh, axis)
+        if ee.get("frame") is not None:
+            if ee["frame"] != "tip":
+                frame = _read_frame(r, ee["frame"], mesh)
+            else:
+                try:
+                    frame = tip_frame_points(mesh, axis)
+                except ValueError as exc:
+                    r.fail("end_effector.frame", f"tip: {exc}; give three points [[x, y, z], ...]")
+        return point, frame
     if isinstance(ee, dict):
-        r.mapping(ee, "end_effector", {"point", "snap"})
+        r.mapping(ee, "end_effector", {"point", "snap", "frame"})
         point = r.vector(ee.get("point"), "end_effector.point")
         snap = r.number(ee, "snap", "end_effector", 0.0, lo=0.0)
+        if ee.get("frame") == "tip":
+            r.fail("end_effector.frame", "'tip' needs end_effector: {tip: ...}; give three points [[x, y, z], ...]")
+        if ee.get("frame") is not None:
+            frame = _read_frame(r, ee["frame"], mesh)
     else:
         point = r.vector(ee, "end_effector")
     emb = embed(mesh, point[None])
@@ -562,7 +577,42 @@ def _read_end_effector(r: _Reader, ee, mesh: Mesh) -> np.ndarray:
                + (f" (snap allows {snap:.4g} m)" if snap else " (give {point, snap} to move it onto the mesh)"))
     if out > 0:
         point = closest_point_in_tet(point, mesh.nodes[mesh.corners[emb.tet[0]]])
-    return point
+    return point, frame
+
+
+def _read_frame(r: _Reader, v, mesh: Mesh) -> np.ndarray:
+    """``end_effector.frame``: three points inside the mesh, not on one line."""
+    if not (isinstance(v, list) and len(v) == 3):
+        r.fail("end_effector.frame", f"expected three points [[x, y, z], [x, y, z], [x, y, z]] or 'tip', got {v!r}")
+    P = np.array([r.vector(x, f"end_effector.frame[{i}]") for i, x in enumerate(v)])
+    L = mesh.characteristic_length()
+    for i, out in enumerate(embed(mesh, P).outside):
+        if out > 1e-6 * L:
+            r.fail(f"end_effector.frame[{i}]", f"point {P[i].tolist()} lies {out:.4g} m outside the mesh")
+    area = np.linalg.norm(np.cross(P[1] - P[0], P[2] - P[0])) / 2
+    size = max(np.linalg.norm(P[1] - P[0]), np.linalg.norm(P[2] - P[0]), 1e-300)
+    if not area > 0.01 * size**2:
+        r.fail("end_effector.frame", f"the three points lie (nearly) on one line (triangle area {area:.3g} m^2): "
+                                     f"they must span a plane")
+    return P
+
+
+def tip_frame_points(mesh: Mesh, axis: str = "+z") -> np.ndarray:
+    """Three points of the end face along ``axis``: its centre, the face node farthest from it, and the face
+    node most nearly a quarter turn from that one about the centre."""
+    sign = -1.0 if axis.startswith("-") else 1.0
+    c = _COMPONENTS[axis[-1]]
+    h = sign * mesh.nodes[:, c]
+    face = mesh.nodes[h >= h.max() - 1e-6 * mesh.characteristic_length()]
+    centre = tip_centre(mesh, axis)
+    r = face - centre
+    a = r[np.argmax(np.linalg.norm(r, axis=1))]
+    n = np.zeros(3)
+    n[c] = 1.0
+    b = r[np.argmax(np.cross(a, r) @ n * sign)]
+    if not np.linalg.norm(np.cross(a, b)) > 1e-3 * np.linalg.norm(a) ** 2:
+        raise ValueError(f"the end face along {axis} has no three nodes spanning a plane")
+    return np.array([centre, centre + a, centre + b])
 
 
 def _read_regions(r: _Reader, lst, mesh: Mesh, material: Material) -> list:
@@ -983,7 +1033,7 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     cables = _read_cables(r, d["cables"], mesh) if "cables" in d else []
     cavities = _read_cavities(r, d["cavities"], mesh, base) if "cavities" in d else []
 
-    end_effector = _read_end_effector(r, d.get("end_effector", "tip"), mesh)
+    end_effector, tip_frame = _read_end_effector(r, d.get("end_effector", "tip"), mesh)
 
     loads = []
     lst = d.get("loads") or []
@@ -1033,7 +1083,7 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     return Problem(mesh, material, fixed, cables + cavities, end_effector, gravity, loads, solver, name=name,
                    source=source, regions=regions, partial_fixed=partial_fixed, admissibility=admissibility,
                    obstacles=obstacles, self_contact=self_contact, self_contact_auto=self_contact_auto, terms=terms,
-                   workspace=workspace, task=task)
+                   workspace=workspace, task=task, tip_frame=tip_frame)
 
 
 def read_yaml(path: str | Path, what: str = "problem file", error=None):

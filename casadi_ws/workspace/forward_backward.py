@@ -704,13 +704,14 @@ def forward_backward(problem, settings: FBSettings | None = None, model: StaticM
         if settings.step is None:
             settings.step = default_step(model)
         # the budget is not part of the answer: a run stopped by it resumes with a larger one
-        # checkpoint format 10: solves checked for their branch, counted path_dependent (9: the seeds' Q; 8: the
+        # checkpoint format 11: the maps with the tip's roll and axis (10: solves checked for their branch, counted
+        # path_dependent; 9: the seeds' Q; 8: the
         # frontier's Q ages; 7: the boundary surface's seeds; 6: the
         # contact map; 5: maps with the actuators' intensities; 4: reached points carry their maps, failures their
         # closest points; 2: frontiers carry Q);
         # an older checkpoint would resume without them and so end with another result than an uninterrupted run
         fp = fingerprint("forward-backward", model, asdict(settings) | {"workers": None, "progress": None,
-                                                                         "max_cells": None, "format": 10})
+                                                                         "max_cells": None, "format": 11})
         run = RunState(checkpoint_dir, "forward-backward", fp, resume, t0)
 
         own = executor is None

@@ -7,9 +7,10 @@
 ``compliance``     the largest eigenvalue of the symmetric part of the tip compliance C K^-1 C^T (m/N): how
                    far the tip moves per newton of external load in its softest direction (1 / the
                    stiffness a task feels there). The full 3 x 3 matrix is kept in result.npz.
-``tilt``           the angle (degrees) between the robot's axis through the tip now and at rest; the axis
-                   is the direction from the fixed nodes' centroid to the rest tip, carried by the tip
-                   element's mean deformation gradient (``direction``: its unit vector now).
+``tilt``           the angle (degrees) between the tip's axis now and at rest (:mod:`casadi_ws.fem.frame`: the
+                   normal of the problem's three ``frame`` points, or the direction from the supports'
+                   centroid to the rest tip turned by the tip elements' rotation); ``axis_x/y/z``: that axis
+                   now (unit vector); ``roll`` (degrees): the tip frame's twist about its rest axis.
 ``contact``        the magnitude of the total force (N) the obstacles exert on the body (summed over those it
                    presses on; 0 without obstacles or out of contact).
 ``state1..n``      each actuator's quantity (a cable's length, m; a cavity's volume, m^3).
@@ -24,7 +25,7 @@ from ..solvers.sensitivity import tip_compliance
 
 __all__ = ["MAPS", "effort", "point_maps"]
 
-MAPS = ("effort", "steerability", "compliance", "tilt", "contact")
+MAPS = ("effort", "steerability", "compliance", "tilt", "roll", "axis_x", "axis_y", "axis_z", "contact")
 """The scalar maps, in the column order of points.csv."""
 
 
@@ -38,33 +39,9 @@ def effort(model, u) -> np.ndarray:
     return np.sqrt(np.mean((u / scale) ** 2, axis=1))
 
 
-def _tip_axis(model):
-    """(the tip element's rows of the F operator, the rest axis): built once per model."""
-    return model.cache.get("tip_axis", lambda: _build_tip_axis(model))
-
-
-def _build_tip_axis(model):
-    nodes = np.unique(model.C.indices // 3)
-    tets = model.mesh.tets
-    # the elements holding the end effector: those with the most of its embedding nodes
-    count = np.isin(tets, nodes).sum(axis=1)
-    elems = np.flatnonzero(count == count.max())
-    X = model.mesh.nodes
-    base = X[model.fixed_nodes].mean(axis=0) if len(model.fixed_nodes) else X.mean(axis=0)
-    axis = model.p0 - base
-    axis = axis / max(np.linalg.norm(axis), 1e-300)
-    nq = model.quadrature_points
-    rows = ((elems[:, None] * nq + np.arange(nq)[None]) * 9)[..., None] + np.arange(9)
-    op = model.deformation_operator()[rows.ravel()]
-    return op, len(elems) * nq, axis
-
-
 def direction(model, q) -> np.ndarray:
-    """The robot's axis at the tip (unit vector), carried by the tip element's mean deformation gradient."""
-    op, m, axis = _tip_axis(model)
-    F = np.eye(3) + (op @ q).reshape(m, 3, 3).mean(axis=0)
-    d = F @ axis
-    return d / np.linalg.norm(d)
+    """The tip's axis now (unit vector, :meth:`casadi_ws.fem.frame.TipFrame.axis`)."""
+    return model.tip_frame.axis(q)
 
 
 def point_maps(model, q, u, A, fac, G=None) -> dict:
@@ -80,13 +57,15 @@ def point_maps(model, q, u, A, fac, G=None) -> dict:
 
 
 def state_maps(model, q, u) -> dict:
-    """The maps that need no LU: effort, tilt and direction, and the actuators' states."""
-    d = direction(model, q)
-    axis = _tip_axis(model)[2]
+    """The maps that need no LU: effort, the tip's orientation (tilt, roll, axis, ``direction``), contact, and the
+    actuators' states."""
+    o = model.tip_frame.orientation(q)
+    d = o["direction"]
     # the obstacles that points press on (the others' forces are the smoothing's ~eps^2 / (kappa g))
     contact = sum(np.linalg.norm(c["force"]) for c in model.contacts(q) if c["points"]) if getattr(model, "has_contact", False) else 0.0
-    return {"effort": float(effort(model, u)[0]), "tilt": float(np.degrees(np.arccos(np.clip(d @ axis, -1.0, 1.0)))),
-            "contact": float(contact), "direction": d, "states": model.actuator_states(q), "intensities": model.intensities(q, u)}
+    return {"effort": float(effort(model, u)[0]), "tilt": o["tilt"], "roll": o["roll"], "axis_x": float(d[0]),
+            "axis_y": float(d[1]), "axis_z": float(d[2]), "contact": float(contact), "direction": d,
+            "states": model.actuator_states(q), "intensities": model.intensities(q, u)}
 
 
 def stack(maps: list[dict], n_u: int) -> dict:
