@@ -151,6 +151,19 @@ def _executor(args, problem):
     return ex
 
 
+def _orientation(args):
+    """--orientation: None (not asked), or the settings of the orientation ranges."""
+    if args.orientation is None:
+        return None
+    from .workspace.orientation import OrientationSettings, parse_orientation
+
+    try:
+        axis, cone = parse_orientation("" if args.orientation.strip() == "range" else args.orientation)
+    except ValueError as exc:
+        raise UsageError(f"--orientation: {exc}") from None
+    return OrientationSettings(reference=axis, cone=cone)
+
+
 def cmd_solve(args) -> int:
     problem = _load(args.problem)
     for key, default in _SOLVE_DEFAULTS.items():  # command line, else the file's workspace section, else default
@@ -162,6 +175,7 @@ def cmd_solve(args) -> int:
         raise UsageError(f"--shapes: expected an integer >= 0 (points whose deformed robot the report draws), "
                          f"got {args.shapes}")
     task = _task(args, problem)
+    orientation = _orientation(args)
     if args.method == "forward":
         from .workspace.forward import ForwardSettings, forward
 
@@ -211,6 +225,11 @@ def cmd_solve(args) -> int:
 
     try:
         measure(result, problem, not args.no_boundary, args.step, task)
+        if orientation is not None:
+            from .runtime.executor import model_for
+            from .workspace.orientation import attach, orientation_ranges
+
+            attach(result, orientation_ranges(model_for(problem), result, orientation, step=args.step), task)
         write_outputs(result, problem, out, args.quiet, shapes=args.shapes)
     except KeyboardInterrupt:  # after the run: its result files may be incomplete
         print(f"casadi-ws: interrupted while writing the results into {out}; some files may be missing: run the "
@@ -485,6 +504,10 @@ def _solve_parser(sub) -> None:
     s.add_argument("--task-box", default=None, metavar="X0,Y0,Z0,X1,Y1,Z1",
                    help="a task region (m): summary.json reports the share of it the workspace reaches")
     s.add_argument("--task-points", default=None, metavar="CSV", help="task points x,y,z (m), instead of a box")
+    s.add_argument("--orientation", default=None, metavar="SPEC",
+                   help="after the run, the range of tip orientations in each cell: 'range' (tilt from the tip's "
+                        "rest axis), or 'axis=[x,y,z],cone=DEG' for the dexterous workspace, where the tip can "
+                        "point within DEG of that axis (docs/methods.md \"Orientation\")")
     s.add_argument("--no-boundary", action="store_true",
                    help="do not build the boundary surface (the volume is then the cells')")
     s.set_defaults(func=cmd_solve)

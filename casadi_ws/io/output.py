@@ -51,10 +51,20 @@ def write_outputs(result, problem, out, quiet: bool = True, boundary: bool = Tru
         per_cell = s["counters"].get("factorizations_per_cell")
         print(f"{result.method}: {s['n_points']} reachable points, {result.failures_line()}, {s['time_s']:.1f} s"
               + (f", {per_cell:.2f} LU factorisations per reached cell" if per_cell is not None else ""))
+        o, dx = result.measures.get("orientation"), result.measures.get("dexterous")
+        if o and o.get("solved"):
+            print(f"orientation: {o['solved']} of {o['cells']} cells, tilt from {o['tilt_min_deg']:.1f} to "
+                  f"{o['tilt_max_deg']:.1f} deg, widest range in one cell {o['widest_range_deg']:.1f} deg "
+                  f"({o['time_s']:.1f} s)")
+        if dx:
+            print(f"dexterous (within {dx['cone_deg']:g} deg of {dx['axis']}): {dx['cells']} cells, "
+                  f"{dx['cell_volume'] * 1e6:.4g} cm^3 of cells ({100 * dx['share']:.0f} % of the workspace's)"
+                  + (f", {100 * dx['task_share']:.0f} % of the task" if dx.get("task_share") is not None else ""))
         if "shapes" in result.timings:
             print(f"report: the robot deformed at {result.counters['shapes']} points, solved again in "
                   f"{result.timings['shapes']:.1f} s (--shapes)")
-        extra = "".join(f" {f}" for f in ("cells.vtu", "boundary.vtu", "boundary.stl") if (out / f).exists())
+        extra = "".join(f" {f}" for f in ("cells.vtu", "dexterous.vtu", "boundary.vtu", "boundary.stl")
+                        if (out / f).exists())
         m = result.measures
         if m.get("volume") is not None and m.get("volume_method") == "boundary":
             how = "the union of U's grid cells' images: the map folds" if m.get("folded") else "boundary surface"

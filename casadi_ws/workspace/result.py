@@ -17,8 +17,10 @@ Files written by :meth:`WorkspaceResult.save` into a directory:
                   of the verified answer the backward solve returned, empty if it had none)
 ``result.npz``    all arrays (points, u, failures, states if kept, cells for forward-backward, maps,
                   boundary_vertices / _triangles / _u)
-``points.vtu``    the points as VTK vertices with u, flags and maps as point data
+``points.vtu``    the points as VTK vertices with u, flags and maps as point data (with the orientation ranges:
+                  tilt_min, tilt_max, dexterous, also in points.csv and cells.vtu)
 ``cells.vtu``     forward-backward only: the reached grid cells as hexahedra, with the maps as cell data
+``dexterous.vtu`` with ``--orientation ...,cone=c``: the cells where the tip can point within the cone
 ``boundary.vtu``  the boundary surface (:mod:`.boundary`) as triangles (2 inputs: the workspace surface and
 ``boundary.stl``  its boundary curve as lines); STL for CAD. Every mesh file is VTK XML unstructured grid,
                   which both ParaView and meshio read (meshio does not read PolyData, .vtp)
@@ -38,6 +40,10 @@ from .interval import default_step
 from .maps import MAPS
 
 __all__ = ["FAILURE_WARNING", "WorkspaceResult", "describe", "load_result"]
+
+ORIENTATION_MAPS = ("tilt_min", "tilt_max", "dexterous")
+"""Per point, where the orientation ranges were computed: the smallest and largest angle (deg) of the tip's axis
+from the reference with the tip in the point's cell, and whether the cell is in the dexterous workspace (1/0)."""
 
 FAILURE_WARNING = 0.05
 """Share of failed solves above which the summary carries a warning."""
@@ -196,14 +202,18 @@ class WorkspaceResult:
         self._save_points(d / "points.vtu")
         if "cells_centres" in self.arrays and len(self.arrays["cells_centres"]):
             self._save_cells(d / "cells.vtu")
+        if "dexterous_centres" in self.arrays:
+            self._save_cells(d / "dexterous.vtu", self.arrays["dexterous_centres"], with_data=False)
         if b is not None and len(b.triangles):
             self._save_boundary(d)
         return d
 
     def maps(self) -> dict:
-        """The point maps (:mod:`casadi_ws.workspace.maps`) as arrays, NaN where not computed."""
+        """The point maps (:mod:`casadi_ws.workspace.maps`) as arrays, NaN where not computed; with the
+        orientation ranges (:mod:`.orientation`) their :data:`ORIENTATION_MAPS` too."""
         k, n_u = self.n_points, (self.u.shape[1] if self.u.ndim == 2 else 0)
-        out = {name: np.asarray(self.arrays.get(f"map_{name}", np.full(k, np.nan)), float) for name in MAPS}
+        out = {name: np.asarray(self.arrays.get(f"map_{name}", np.full(k, np.nan)), float)
+               for name in MAPS + self._orientation_maps()}
         for key in ("states", "intensities"):
             out[key] = np.asarray(self.arrays.get(f"map_{key}", np.full((k, n_u), np.nan)), float).reshape(k, n_u)
         return out
@@ -231,7 +241,7 @@ class WorkspaceResult:
         for i in range(self.u.shape[1] if self.u.ndim == 2 else 0):
             data[f"u{i + 1}"] = self.u[:, i]
         maps = self.maps()
-        for name in MAPS:
+        for name in MAPS + self._orientation_maps():
             data[name] = maps[name]
         for i in range(maps["states"].shape[1]):
             data[f"state{i + 1}"] = maps["states"][:, i]
@@ -243,27 +253,39 @@ class WorkspaceResult:
         any CSV reader takes the file; bit i is ``VIOLATIONS[i]``, listed in summary.json), then the maps."""
         n_u = self.u.shape[1] if self.u.ndim == 2 else 0
         maps = self.maps()
+        extra = self._orientation_maps()
         head = ",".join(["x", "y", "z"] + [f"u{i + 1}" for i in range(n_u)] + ["stable", "admissible", "violations"]
                         + list(MAPS) + [f"state{i + 1}" for i in range(n_u)]
-                        + [f"intensity{i + 1}" for i in range(n_u)])
+                        + [f"intensity{i + 1}" for i in range(n_u)] + list(extra))
         data = np.hstack([self.points, self.u.reshape(self.n_points, n_u), self.stable[:, None],
                           self.admissible[:, None], self._violations()[:, None],
-                          np.column_stack([maps[name] for name in MAPS]), maps["states"], maps["intensities"]])
+                          np.column_stack([maps[name] for name in MAPS]), maps["states"], maps["intensities"],
+                          np.array([maps[name] for name in extra]).T.reshape(self.n_points, len(extra))])
         np.savetxt(path, data, delimiter=",", header=head, comments="",
-                   fmt=["%.10g"] * (3 + n_u) + ["%d"] * 3 + ["%.6g"] * (len(MAPS) + n_u) + ["%.10g"] * n_u)
+                   fmt=["%.10g"] * (3 + n_u) + ["%d"] * 3 + ["%.6g"] * (len(MAPS) + n_u) + ["%.10g"] * n_u
+                   + ["%.6g"] * len(extra))
 
-    def _save_cells(self, path: Path) -> None:
-        """The reached cells (forward-backward's W_E) as hexahedra, the cell's point's maps as cell data."""
+    def _orientation_maps(self) -> tuple:
+        """The orientation ranges' columns the result has (:data:`ORIENTATION_MAPS`, after
+        :func:`casadi_ws.workspace.orientation.orientation_ranges`)."""
+        return tuple(n for n in ORIENTATION_MAPS if f"map_{n}" in self.arrays)
+
+    def _save_cells(self, path: Path, centres=None, with_data: bool = True) -> None:
+        """The reached cells (forward-backward's W_E; or the cells at ``centres``, e.g. the dexterous workspace's)
+        as hexahedra, the cell's point's maps as cell data."""
         import meshio
 
-        c = np.asarray(self.arrays["cells_centres"])
-        h = 0.5 * float(self.arrays["cell_step"])
+        c = np.asarray(self.arrays["cells_centres"] if centres is None else centres, float).reshape(-1, 3)
+        step = self.arrays.get("cell_step", np.nan)
+        if centres is not None or not np.isfinite(float(step)):
+            step = self.measures.get("orientation", {}).get("cell_step", step)
+        h = 0.5 * float(step)
         # VTK hexahedron order: the bottom face counter-clockwise, then the top face
         corners = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
                             [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], float) * h
         pts = (c[:, None, :] + corners[None]).reshape(-1, 3)
-        data = {k: [np.asarray(v, float)] for k, v in self._point_data().items()} if len(c) == self.n_points \
-            else {}
+        data = {k: [np.asarray(v, float)] for k, v in self._point_data().items()} \
+            if with_data and len(c) == self.n_points else {}
         meshio.write(path, meshio.Mesh(pts, [("hexahedron", np.arange(len(pts)).reshape(-1, 8))], cell_data=data))
 
     def _save_points(self, path: Path) -> None:
