@@ -77,6 +77,9 @@ def _figure(result, mesh, obstacles=(), shapes=None):
         traces.append(go.Mesh3d(x=V[:, 0], y=V[:, 1], z=V[:, 2], i=T[:, 0], j=T[:, 1], k=T[:, 2],
                                 color="steelblue", opacity=0.3, name="workspace boundary", showlegend=True,
                                 flatshading=True, hoverinfo="skip"))
+    if "orientation_axis_at_min" in result.arrays:
+        traces.append(go.Scatter3d(x=[], y=[], z=[], mode="lines", line=dict(color="royalblue", width=6),
+                                   name="tip axis range at the clicked point", visible=False, hoverinfo="skip"))
     if shapes is not None:
         X, T = np.asarray(mesh.nodes, float) * MM, boundary_faces(mesh)[:, :3]
         traces.append(go.Mesh3d(x=X[:, 0], y=X[:, 1], z=X[:, 2], i=T[:, 0], j=T[:, 1], k=T[:, 2],
@@ -87,6 +90,10 @@ def _figure(result, mesh, obstacles=(), shapes=None):
     for name in ("effort", "steerability", "compliance", "tilt", "contact"):
         if np.any(np.isfinite(maps[name])) and (name != "contact" or len(obstacles)):
             options[f"{name} ({_UNITS[name]})"] = np.asarray(maps[name], float) * _SCALE.get(name, 1.0)
+    if "tilt_min" in maps:  # the orientation ranges (--orientation): each point's cell's
+        options["tilt range in the cell (deg)"] = maps["tilt_max"] - maps["tilt_min"]
+        options["smallest tilt in the cell (deg)"] = maps["tilt_min"]
+        options["largest tilt in the cell (deg)"] = maps["tilt_max"]
     for i, (label, unit) in enumerate(_inputs(result)):
         options[f"{label} ({unit or 'input'})"] = result.u[:, i]
     names = list(options) or ["none"]
@@ -149,6 +156,22 @@ def _shapes(result, mesh, states=None):
     return np.asarray(pick, dtype=int), ((X[None] + Q) * MM).astype(np.float32), nodes
 
 
+def _range_axes(result) -> list:
+    """Per point: the tip's axis at the two ends of its cell's range [[x, y, z], [x, y, z]] (None where not
+    solved), for the page to draw the cone of directions at a clicked point."""
+    a = result.arrays
+    cells = np.asarray(a["orientation_cells"])
+    step = float(result.measures.get("orientation", {}).get("cell_step", np.nan))
+    origin = np.asarray(a.get("grid_origin", result.points[0] if result.n_points else np.zeros(3)), float)
+    index = {tuple(c): i for i, c in enumerate(cells.tolist())}
+    out = []
+    for p in np.asarray(result.points):
+        i = index.get(tuple(np.round((p - origin) / step).astype(int).tolist())) if np.isfinite(step) else None
+        ends = None if i is None else [a["orientation_axis_at_min"][i], a["orientation_axis_at_max"][i]]
+        out.append(None if ends is None or not np.all(np.isfinite(ends)) else np.round(ends, 5).tolist())
+    return out
+
+
 def _details(result, mesh, shapes=None) -> dict:
     """What the page shows for a clicked point: its inputs and intensities with units, maps, admissibility,
     and where kept its deformed robot (the boundary surface's vertices, float32, mm, base64)."""
@@ -162,7 +185,14 @@ def _details(result, mesh, shapes=None) -> dict:
            "intensities": np.asarray(maps["intensities"], float).round(9).tolist(),
            "tip_mm": (np.asarray(result.points) * MM).round(4).tolist(),
            "contact_N": np.asarray(maps["contact"], float).round(6).tolist(),
-           "admissible": [", ".join(decode(int(v))) or "yes" for v in viol], "max_shapes": MAX_SHAPES}
+           "admissible": [", ".join(decode(int(v))) or "yes" for v in viol], "max_shapes": MAX_SHAPES,
+           "tilt": np.nan_to_num(np.asarray(maps["tilt"], float)).round(4).tolist()}
+    if "tilt_min" in maps:
+        rng = np.column_stack([maps["tilt_min"], maps["tilt_max"]]).round(3)
+        out["tilt_range"] = [[None if not np.isfinite(v) else float(v) for v in r] for r in rng]
+        out["axes"] = _range_axes(result)
+        span = np.ptp(np.asarray(result.points), axis=0).max() if result.n_points else 0.0
+        out["axis_mm"] = float(0.15 * span * MM) or 10.0
     if shapes is not None:
         pick, V, nodes = shapes
         out["shape_of"] = {int(i): k for k, i in enumerate(pick)}
@@ -190,6 +220,17 @@ _CLICK_JS = """
       rows += '<tr><th>' + d.inputs[j] + '</th><td>' + d.u[k][j].toPrecision(4) + ' (intensity ' + d.intensities[k][j].toPrecision(4) + ')</td></tr>';
     rows += '<tr><th>contact</th><td>' + d.contact_N[k].toPrecision(3) + ' N</td></tr>';
     rows += '<tr><th>admissible</th><td>' + d.admissible[k] + '</td></tr>';
+    rows += '<tr><th>tilt</th><td>' + d.tilt[k].toFixed(2) + ' deg</td></tr>';
+    var cone = gd.data.findIndex(function (t) { return t.name === 'tip axis range at the clicked point'; });
+    if (d.tilt_range && d.tilt_range[k][0] !== null) {
+      rows += '<tr><th>tilt in its cell</th><td>' + d.tilt_range[k][0].toFixed(2) + ' to ' + d.tilt_range[k][1].toFixed(2) + ' deg (blue: the axis at each end)</td></tr>';
+      var ax = d.axes[k];
+      if (cone >= 0 && ax) {
+        var p = d.tip_mm[k], L = d.axis_mm, cx = [], cy = [], cz = [];
+        for (var e = 0; e < 2; e++) { cx.push(p[0], p[0] + L * ax[e][0], null); cy.push(p[1], p[1] + L * ax[e][1], null); cz.push(p[2], p[2] + L * ax[e][2], null); }
+        Plotly.restyle(gd, {x: [cx], y: [cy], z: [cz], visible: true}, [cone]);
+      }
+    }
     var robot = gd.data.findIndex(function (t) { return t.name === 'robot at the clicked point'; });
     var s = d.shape_of ? d.shape_of[k] : undefined, at = k;
     if (robot >= 0 && s === undefined && d.shape_of) {
