@@ -49,6 +49,47 @@ def nodes_inside_other_tetrahedra(m, q, depth=0.01):
     return inside
 
 
+def chromium():
+    """Debian's chromium for the report's page tests, or skip (``make test`` installs it with apt)."""
+    import shutil
+
+    exe = shutil.which("chromium") or shutil.which("chromium-browser")
+    if exe is None:
+        pytest.skip("no chromium on this machine (make test installs Debian's chromium with apt; it failed)")
+    return exe
+
+
+def click_points(clicks, trace: str) -> list:
+    """Open each (page file, point index) of ``clicks`` in headless Chromium at 1280x720, click that reported
+    point, and return per click (the #point panel's text, the trace named ``trace`` as [visible, x, y, z] or
+    None); a page error fails the test."""
+    from playwright.sync_api import sync_playwright
+
+    seen = []
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=chromium(), args=[
+            "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox"])
+        for page_file, k in clicks:
+            page = browser.new_page(viewport={"width": 1280, "height": 720})
+            errors = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(page_file.as_uri())
+            page.wait_for_selector("#workspace .gl-container canvas", timeout=60000)
+            page.evaluate("""k => { const gd = document.getElementById('workspace');
+                const c = gd.data.findIndex(t => t.name === 'reached points');
+                gd.emit('plotly_click', {points: [{curveNumber: c, pointNumber: k}]}); }""", k)
+            page.wait_for_timeout(300)
+            text = page.locator("#point").inner_text()
+            drawn = page.evaluate("""name => { const t = document.getElementById('workspace').data.find(
+                t => t.name === name); return t ? [t.visible, Array.from(t.x), Array.from(t.y),
+                Array.from(t.z)] : null; }""", trace)
+            assert not errors, errors
+            seen.append((text, drawn))
+            page.close()
+        browser.close()
+    return seen
+
+
 def cantilever(n=2, slender=10, model="linear", nu=0.3, E=1e6, L=0.2, cable_offset=None, loads=(), order=1):
     """A square beam along +z clamped at z = 0, n elements across, cubic elements (order 2: 10-node
     tetrahedra)."""

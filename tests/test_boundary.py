@@ -3,7 +3,6 @@ result files read back by meshio, and the interactive report rendered by a real 
 
 import csv
 import itertools
-import shutil
 from types import SimpleNamespace
 
 import meshio
@@ -17,7 +16,7 @@ from casadi_ws.workspace.boundary import BoundarySettings, Seeds, _closed, _solv
 from casadi_ws.workspace.forward_backward import FBSettings, forward_backward
 from casadi_ws.workspace.maps import point_maps
 from casadi_ws.workspace.measures import measures
-from conftest import REPO, cantilever, small_trunk
+from conftest import REPO, cantilever, chromium, click_points, small_trunk
 
 
 def jacobian_integral(model, n=3):
@@ -316,18 +315,12 @@ def test_meshio_reads_every_mesh_file_back(fb_dir):
     assert np.linalg.det(np.array([P[1] - P[0], P[3] - P[0], P[4] - P[0]])) > 0
 
 
-def _browser():
-    return shutil.which("chromium") or shutil.which("chromium-browser")
-
-
 def test_report_renders_in_headless_chromium(fb_dir, tmp_path):
     from casadi_ws.io.report import write_report
 
     r, d = fb_dir
     page_file = write_report(r, tmp_path / "report.html", small_trunk(n_cables=3).mesh)
-    exe = _browser()
-    if exe is None:
-        pytest.skip("no chromium on this machine (make test installs Debian's chromium with apt; it failed)")
+    exe = chromium()
     from playwright.sync_api import sync_playwright
     from PIL import Image
 
@@ -426,35 +419,8 @@ def test_clicking_a_point_shows_its_inputs_and_the_robot_deformed_there(tmp_path
     assert bare.counters["shapes"] == 6  # every picked point re-solved to its reported tip
     pages = [write_report(kept, tmp_path / "kept.html", pb.mesh), tmp_path / "solved" / "report.html",
              tmp_path / "solved" / "report.html", write_report(bare, tmp_path / "none.html", pb.mesh)]
-    exe = _browser()
-    if exe is None:
-        pytest.skip("no chromium on this machine (make test installs Debian's chromium with apt; it failed)")
-    from playwright.sync_api import sync_playwright
-
     # the six points the solved page holds are 0, 3, 6, 9, 12, 15 (spread over 16): 10 is not one of them
-    clicks = [10, 9, 10, 10]
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=exe, args=["--use-angle=swiftshader",
-                                                               "--enable-unsafe-swiftshader", "--no-sandbox"])
-        seen = []
-        for page_file, k in zip(pages, clicks):
-            page = browser.new_page(viewport={"width": 1280, "height": 720})
-            errors = []
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(page_file.as_uri())
-            page.wait_for_selector("#workspace .gl-container canvas", timeout=60000)
-            page.evaluate("""k => { const gd = document.getElementById('workspace');
-                const c = gd.data.findIndex(t => t.name === 'reached points');
-                gd.emit('plotly_click', {points: [{curveNumber: c, pointNumber: k}]}); }""", k)
-            page.wait_for_timeout(300)
-            text = page.locator("#point").inner_text()
-            robot = page.evaluate("""() => { const t = document.getElementById('workspace').data.find(
-                t => t.name === 'robot at the clicked point'); return t ? [t.visible, Array.from(t.x),
-                Array.from(t.y), Array.from(t.z)] : null; }""")
-            assert not errors
-            seen.append((text, robot))
-            page.close()
-        browser.close()
+    seen = click_points(list(zip(pages, [10, 9, 10, 10])), "robot at the clicked point")
 
     def drawn_at(robot, point):
         """The drawn robot's tip is ``point`` (the end effector is its tip node)."""

@@ -3,7 +3,7 @@ cell against forward clouds, its ends re-solved, no range without redundancy, th
 
 import numpy as np
 import pytest
-from conftest import REPO, cantilever, run_cli, small_trunk
+from conftest import REPO, cantilever, click_points, run_cli, small_trunk
 from scipy.spatial.transform import Rotation
 
 from casadi_ws import StaticModel
@@ -191,8 +191,6 @@ def test_orientation_specs_and_bad_ones():
 
 @pytest.mark.slow
 def test_the_report_colours_by_tilt_range_and_draws_the_axis_range_at_a_clicked_point(four_cables, tmp_path):
-    from test_boundary import _browser
-
     from casadi_ws.io.report import write_report
 
     pb, _, r, o = four_cables
@@ -200,29 +198,8 @@ def test_the_report_colours_by_tilt_range_and_draws_the_axis_range_at_a_clicked_
     page_file = write_report(r, tmp_path / "report.html", pb.mesh)
     text = page_file.read_text()
     assert "tilt range in the cell (deg)" in text
-    exe = _browser()
-    if exe is None:
-        pytest.skip("no chromium on this machine (make test installs Debian's chromium with apt; it failed)")
-    from playwright.sync_api import sync_playwright
-
     k = int(np.nanargmax(r.maps()["tilt_max"] - r.maps()["tilt_min"]))
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=exe, args=["--use-angle=swiftshader",
-                                                               "--enable-unsafe-swiftshader", "--no-sandbox"])
-        page = browser.new_page(viewport={"width": 1280, "height": 720})
-        errors = []
-        page.on("pageerror", lambda e: errors.append(str(e)))
-        page.goto(page_file.as_uri())
-        page.wait_for_selector("#workspace .gl-container canvas", timeout=60000)
-        page.evaluate("""k => { const gd = document.getElementById('workspace');
-            const c = gd.data.findIndex(t => t.name === 'reached points');
-            gd.emit('plotly_click', {points: [{curveNumber: c, pointNumber: k}]}); }""", k)
-        page.wait_for_timeout(300)
-        shown = page.locator("#point").inner_text()
-        lines = page.evaluate("""() => { const t = document.getElementById('workspace').data.find(
-            t => t.name === 'tip axis range at the clicked point'); return [t.visible, t.x, t.y, t.z]; }""")
-        browser.close()
-    assert not errors
+    ((shown, lines),) = click_points([(page_file, k)], "tip axis range at the clicked point")
     lo, hi = r.maps()["tilt_min"][k], r.maps()["tilt_max"][k]
     assert f"{lo:.2f} to {hi:.2f} deg" in shown
     # two segments from the clicked tip along the axis at each end of the range

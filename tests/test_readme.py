@@ -166,6 +166,16 @@ def _check_outputs(outputs, tmp_path):
             assert res.n_points > 0 and res.admissible.all()
             for k in np.linspace(0, res.n_points - 1, 5).astype(int):
                 np.testing.assert_allclose(res.points[k], tip_at(path, res.u[k]), atol=1e-7)
+            if "--orientation" in args:  # every cell's range solved, its ends verified equilibria in the cell
+                o = res.measures["orientation"]
+                assert o["solved"] == o["cells"] == res.n_points and 0 < res.measures["dexterous"]["cells"] < o["cells"]
+                assert Path(args[args.index("--out") + 1], "dexterous.vtu").exists()
+                k = int(np.nanargmax(res.maps()["tilt_max"]))
+                i = [tuple(c) for c in res.arrays["orientation_cells"].tolist()].index(
+                    tuple(np.round((res.points[k] - res.arrays["grid_origin"]) / res.arrays["cell_step"]).astype(int)))
+                tip = tip_at(path, res.arrays["orientation_u_at_max"][i])
+                centre = res.arrays["grid_origin"] + res.arrays["orientation_cells"][i] * res.arrays["cell_step"]
+                assert np.all(np.abs(tip - centre) <= res.arrays["cell_step"] * (0.5 + 1e-9))
             if "cells" in res.arrays:  # every reported tip lies in its reported cell
                 step, origin = float(res.arrays["cell_step"]), res.arrays["grid_origin"]
                 np.testing.assert_array_equal(np.round((res.points - origin) / step), res.arrays["cells"])
