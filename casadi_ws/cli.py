@@ -62,8 +62,11 @@ def cmd_equilibrium(args) -> int:
                  for a, v, st, ti in zip(problem.actuators, u, states, t)]
     units = {"tip": "m", "u": _u_unit(problem), "force": "N"}
     checks = adm.to_dict() if adm is not None else {"admissible": False, "stable": None, "violations": []}
+    o = model.tip_frame.orientation(eq.q)
     out = {"problem": problem.name, **eq.to_dict(), **checks, "stable_branch": branched, "actuators": actuators,
-           "contacts": model.contacts(eq.q), "units": units}
+           "contacts": model.contacts(eq.q), "orientation": {"tilt": o["tilt"], "roll": o["roll"],
+                                                              "axis": o["direction"].tolist()},
+           "units": units | {"tilt": "deg", "roll": "deg"}}
     print(json.dumps(out, indent=None if args.compact else 2))
     if "self_penetration" in checks["violations"] and problem.self_contact_auto is None:
         print("casadi-ws: the body passes through itself at these inputs: with 'self_contact: auto' in the problem "

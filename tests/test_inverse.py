@@ -48,7 +48,7 @@ def test_follow_a_circle_inside_the_workspace(tmp_path):
     assert res.reachable.all() and res.errors.max() < 1e-6
     assert np.abs(np.diff(res.u, axis=0)).max() < 20.0  # continuous: neighbours 13 N apart in U
     res.save_csv(tmp_path / "f.csv")
-    assert np.loadtxt(tmp_path / "f.csv", delimiter=",", skiprows=1).shape == (13, 10)
+    assert np.loadtxt(tmp_path / "f.csv", delimiter=",", skiprows=1).shape == (13, 15)  # ..., u1, u2, tilt, roll, axis
 
 
 def test_change_limit():

@@ -152,6 +152,8 @@ def _check_outputs(outputs, tmp_path):
             out = json.loads(stdout)
             assert out["converged"] and out["admissible"] and out["stable"] and out["violations"] == []
             np.testing.assert_allclose(out["tip"], tip_at(path, out["u"]), atol=1e-9)
+            eq = solve_equilibrium(model(path), np.asarray(out["u"], float))
+            assert out["orientation"]["tilt"] == pytest.approx(model(path).tip_frame.orientation(eq.q)["tilt"], abs=1e-6)
         elif kind == "reach":
             out = json.loads(stdout)
             target = np.array(args[args.index("--target") + 1].split(","), float)
@@ -160,7 +162,7 @@ def _check_outputs(outputs, tmp_path):
         elif kind == "follow":
             rows = np.loadtxt(args[args.index("--out") + 1] + "/follow.csv", delimiter=",", skiprows=1, ndmin=2)
             for row in rows[::4]:
-                np.testing.assert_allclose(row[3:6], tip_at(path, row[8:]), atol=1e-8)
+                np.testing.assert_allclose(row[3:6], tip_at(path, row[8:-5]), atol=1e-8)  # (then tilt, roll, axis)
         elif kind == "solve":
             res = cw.load_result(args[args.index("--out") + 1])
             assert res.n_points > 0 and res.admissible.all()

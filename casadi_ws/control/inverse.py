@@ -87,6 +87,8 @@ class ReachResult:
     method: str = "reduced"
     """The method whose answer this is: ``reduced``, or ``ipopt`` (asked for, or where Gauss-Newton
     stalled)."""
+    orientation: dict | None = None
+    """The tip's orientation at the answer: ``tilt``, ``roll`` (deg) and ``axis`` (:mod:`casadi_ws.fem.frame`)."""
 
     def to_dict(self) -> dict:
         adm = self.admissibility
@@ -94,7 +96,8 @@ class ReachResult:
                 "error": self.error, "status": Status(self.status).label, "status_code": int(self.status),
                 "admissible": bool(adm and adm.admissible), "stable": bool(adm and adm.stable),
                 "violations": list(adm.violations) if adm else [], "iterations": self.iterations,
-                "homotopy": self.homotopy, "method": self.method, "units": {"tip": "m", "u": "N", "error": "m"}}
+                "homotopy": self.homotopy, "method": self.method, "orientation": self.orientation,
+                "units": {"tip": "m", "u": "N", "error": "m", "tilt": "deg", "roll": "deg"}}
 
 
 def _solver(model, settings: ReachSettings) -> EquilibriumNLP:
@@ -115,9 +118,16 @@ def _rest_points(model, settings):
 
 def reach(problem_or_model, target, q0=None, u0=None, settings: ReachSettings | None = None,
           extra_targets=None, u_ref=None) -> ReachResult:
-    """Tensions that bring the end-effector to ``target`` (closest reachable point otherwise)."""
-    settings = settings or ReachSettings()
+    """Tensions that bring the end-effector to ``target`` (closest reachable point otherwise), with the tip's
+    orientation there (``orientation``: tilt and roll in degrees, the axis)."""
     model = problem_or_model if isinstance(problem_or_model, StaticModel) else StaticModel(problem_or_model)
+    r = _reach(model, target, q0, u0, settings or ReachSettings(), extra_targets, u_ref)
+    o = model.tip_frame.orientation(r.q)
+    r.orientation = {"tilt": o["tilt"], "roll": o["roll"], "axis": o["direction"].tolist()}
+    return r
+
+
+def _reach(model, target, q0, u0, settings, extra_targets, u_ref) -> ReachResult:
     target = np.asarray(target, dtype=float).reshape(3)
     if q0 is None:
         start = solve_equilibrium(model, model.u_min.copy())
@@ -269,12 +279,15 @@ class FollowResult:
     reachable: np.ndarray
     status: list
     settings: dict
+    orientation: np.ndarray | None = None
+    """(k, 5): tilt, roll (deg) and the tip's axis at each answer."""
 
     def save_csv(self, path) -> None:
         n_u = self.u.shape[1]
         header = ",".join(["x_target", "y_target", "z_target", "x", "y", "z", "error", "reachable"]
-                          + [f"u{i + 1}" for i in range(n_u)])
-        data = np.hstack([self.targets, self.tips, self.errors[:, None], self.reachable[:, None], self.u])
+                          + [f"u{i + 1}" for i in range(n_u)] + ["tilt", "roll", "axis_x", "axis_y", "axis_z"])
+        data = np.hstack([self.targets, self.tips, self.errors[:, None], self.reachable[:, None], self.u,
+                          self.orientation])
         np.savetxt(path, data, delimiter=",", header=header, comments="", fmt="%.10g")
 
 
@@ -292,4 +305,6 @@ def follow(problem_or_model, targets, settings: ReachSettings | None = None) -> 
         q, u = r.q, r.u  # the verified equilibrium (or, if verification failed, the previous one)
     return FollowResult(targets, np.array([r.tip for r in rows]), np.array([r.u for r in rows]),
                         np.array([r.error for r in rows]), np.array([r.reachable for r in rows]),
-                        [r.status for r in rows], asdict(settings))
+                        [r.status for r in rows], asdict(settings),
+                        np.array([[r.orientation["tilt"], r.orientation["roll"], *r.orientation["axis"]]
+                                  for r in rows]).reshape(-1, 5))
