@@ -178,9 +178,36 @@ def _check_outputs(outputs, tmp_path):
                 tip = tip_at(path, res.arrays["orientation_u_at_max"][i])
                 centre = res.arrays["grid_origin"] + res.arrays["orientation_cells"][i] * res.arrays["cell_step"]
                 assert np.all(np.abs(tip - centre) <= res.arrays["cell_step"] * (0.5 + 1e-9))
+                _forward_points_in_their_ranges(model(path), res)
             if "cells" in res.arrays:  # every reported tip lies in its reported cell
                 step, origin = float(res.arrays["cell_step"]), res.arrays["grid_origin"]
                 np.testing.assert_array_equal(np.round((res.points - origin) / step), res.arrays["cells"])
+
+
+def _forward_points_in_their_ranges(m, res):
+    """Issue 72's check: 40 random points of an n_d = 8 grid of U, each solved from rest (the definition of a
+    forward point), have their tilt from the reference within their cell's range, up to the cell's variation."""
+    import numpy as np
+
+    from casadi_ws.solvers.equilibrium import quasi_static
+
+    a = res.arrays
+    ref, step, origin = a["orientation_reference"], float(a["cell_step"]), a["grid_origin"]
+    index = {tuple(c): i for i, c in enumerate(a["orientation_cells"].tolist())}
+    rng = np.random.default_rng(0)
+    inside = found = 0
+    for _ in range(40):
+        u = m.u_min + rng.integers(0, 8, m.n_u) / 7 * (m.u_max - m.u_min)
+        eq = quasi_static(m, u)
+        i = index.get(tuple(np.round((eq.tip - origin) / step).astype(int).tolist()))
+        if not eq.converged or i is None:
+            continue
+        found += 1
+        tilt = np.degrees(np.arccos(np.clip(m.tip_frame.axis(eq.q) @ ref, -1, 1)))
+        lo, hi, var = a["orientation_tilt_min"][i], a["orientation_tilt_max"][i], a["orientation_variation"][i]
+        assert lo - var <= tilt <= hi + var, (u, tilt, lo, hi, var)
+        inside += bool(lo - 0.01 <= tilt <= hi + 0.01)
+    assert found >= 36 and inside >= 0.9 * found  # (forward-backward's cells miss a few of the grid's tips)
 
 
 def test_the_readme_python_script_runs_as_written(tmp_path):
@@ -228,3 +255,15 @@ def test_the_readmes_number_of_drawn_robots_is_the_reports():
 
     text = " ".join((REPO / "README.md").read_text().split())
     assert f"the page holds the shapes of up to {MAX_SHAPES} points" in text
+
+
+def test_the_readmes_dexterous_numbers_are_the_benchmarks():
+    import json
+
+    b = json.loads((REPO / "benchmarks" / "orientation.json").read_text())
+    text = " ".join((REPO / "README.md").read_text().split())
+    d, c = b["dexterous"], b["check"]
+    assert (f"At {1e3 * b['step_m']:g} mm: {b['cells']} cells, {d['cells']} of them ({1e6 * d['cell_volume']:.1f} cm³ "
+            f"of cells) where the tip can point within {b['cone_deg']:g}° of +z; the ranges took "
+            f"{b['orientation_s']:.0f} s after the {b['fb_s']:.0f} s of forward-backward, and "
+            f"{c['inside_range']} of {c['points']} points") in text
