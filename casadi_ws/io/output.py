@@ -26,19 +26,21 @@ def write_outputs(result, problem, out, quiet: bool = True, boundary: bool = Tru
     (:func:`measure`, the boundary too unless ``boundary`` is False). The one call a script needs after
     ``forward`` or ``forward_backward``; ``quiet`` False prints the summary lines the command prints.
 
-    ``shapes``: of how many points (spread over them; default :data:`~casadi_ws.io.report.MAX_SHAPES`) the
-    report draws the deformed robot; where the run kept no states they are solved again here, each from the
+    ``shapes``: of how many points (spread over them; default :data:`~casadi_ws.io.report.MAX_SHAPES`, fewer
+    for a robot with a large boundary: :data:`~casadi_ws.io.report.SHAPE_BYTES`) the report draws the deformed
+    robot; where the run kept no states they are solved again here, each from the
     nearest one solved before it, and kept where the tip is the reported point (the time is
     ``timings['shapes']``, the count ``counters['shapes']``)."""
     from .plots import three_views, workspace_3d
-    from .report import MAX_SHAPES, shape_points, write_report
+    from .report import MAX_SHAPES, shape_count, shape_points, write_report
     from .scene import write_scene
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     if not result.measures:
         measure(result, problem, boundary)
-    states = _shape_states(result, problem, MAX_SHAPES if shapes is None else shapes, shape_points)
+    limit = shape_count(problem.mesh, MAX_SHAPES if shapes is None else shapes)
+    states = _shape_states(result, problem, limit, shape_points)
     result.save(out)
     scene = write_scene(problem, out)
     three_views(result, out / "three_views.png", problem.mesh, title=f"{problem.name}: {result.method} workspace")

@@ -6,7 +6,8 @@ compliance, tilt, contact with obstacles, u1..un), with
 the summary's numbers beside it. plotly.js is embedded in the file (~4.6 MB), so it opens anywhere.
 
 Clicking a point shows its tip, inputs and intensities (with units), contact force and admissibility, and the robot
-deformed there: the boundary surface's vertices of up to :data:`MAX_SHAPES` points, float32 in base64, from the
+deformed there: the boundary surface's vertices of up to :data:`MAX_SHAPES` points (fewer where they would exceed
+:data:`SHAPE_BYTES`), float32 in base64, from the
 states the run kept (``--store-states``) or else solved again after the run (:func:`casadi_ws.io.output.write_outputs`);
 a point outside that subset shows the nearest one's, saying so (measured: trunk_2cables at n_d = 21, 441 points,
 5.1 MB without shapes, 6.9 MB with 200).
@@ -125,6 +126,20 @@ MAX_SHAPES = 200
 """Most points whose deformed robot the page holds (evenly spread over the points where there are more)."""
 
 
+SHAPE_BYTES = 4_000_000
+"""Most bytes of float32 vertices the page holds for the deformed robots (before base64): a robot with a large
+boundary gets fewer shapes (the PneuNets finger's 144 shapes made a 12.8 MB page)."""
+
+
+def shape_count(mesh, limit: int = MAX_SHAPES) -> int:
+    """How many deformed robots the page holds: ``limit``, fewer where their boundary vertices would exceed
+    :data:`SHAPE_BYTES`."""
+    if mesh is None:
+        return 0
+    n = np.unique(boundary_faces(mesh)[:, :3]).size
+    return int(min(limit, SHAPE_BYTES // (12 * max(n, 1))))
+
+
 def shape_points(result, limit: int = MAX_SHAPES) -> np.ndarray:
     """The indices of the points whose deformed robot the page draws: ``limit`` spread evenly over the points
     (in the order the run reports them), or all of them where there are fewer."""
@@ -144,7 +159,7 @@ def _shapes(result, mesh, states=None):
     if states is None:
         if result.states is None:
             return None
-        pick = shape_points(result)
+        pick = shape_points(result, shape_count(mesh))
         Q = np.asarray(result.states)[pick]
     else:
         pick, Q = states
