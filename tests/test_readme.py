@@ -185,11 +185,12 @@ def _check_outputs(outputs, tmp_path):
 
 
 def _forward_points_in_their_ranges(m, res):
-    """Issue 72's check: 40 random points of an n_d = 8 grid of U, each solved from rest (the definition of a
-    forward point), have their tilt from the reference within their cell's range, up to the cell's variation."""
+    """Issue 72's check: 40 random points of an n_d = 8 grid of U, each solved from rest (the contact-free trunk
+    has one equilibrium per input: tests/test_branch.py), have their tilt from the reference within their cell's
+    range, up to the cell's variation."""
     import numpy as np
 
-    from casadi_ws.solvers.equilibrium import quasi_static
+    from casadi_ws.solvers.equilibrium import solve_equilibrium
 
     a = res.arrays
     ref, step, origin = a["orientation_reference"], float(a["cell_step"]), a["grid_origin"]
@@ -198,7 +199,7 @@ def _forward_points_in_their_ranges(m, res):
     inside = found = 0
     for _ in range(40):
         u = m.u_min + rng.integers(0, 8, m.n_u) / 7 * (m.u_max - m.u_min)
-        eq = quasi_static(m, u)
+        eq = solve_equilibrium(m, u)
         i = index.get(tuple(np.round((eq.tip - origin) / step).astype(int).tolist()))
         if not eq.converged or i is None:
             continue
