@@ -78,7 +78,7 @@ def _figure(result, mesh, obstacles=(), shapes=None):
         traces.append(go.Mesh3d(x=V[:, 0], y=V[:, 1], z=V[:, 2], i=T[:, 0], j=T[:, 1], k=T[:, 2],
                                 color="steelblue", opacity=0.3, name="workspace boundary", showlegend=True,
                                 flatshading=True, hoverinfo="skip"))
-    if "orientation_axis_at_min" in result.arrays:
+    if "point_axis_at_min" in result.arrays:
         traces.append(go.Scatter3d(x=[], y=[], z=[], mode="lines", line=dict(color="royalblue", width=6),
                                    name="tip axis range at the clicked point", visible=False, hoverinfo="skip"))
     if shapes is not None:
@@ -174,17 +174,8 @@ def _shapes(result, mesh, states=None):
 def _range_axes(result) -> list:
     """Per point: the tip's axis at the two ends of its cell's range [[x, y, z], [x, y, z]] (None where not
     solved), for the page to draw the cone of directions at a clicked point."""
-    a = result.arrays
-    cells = np.asarray(a["orientation_cells"])
-    step = float(result.measures.get("orientation", {}).get("cell_step", np.nan))
-    origin = np.asarray(a.get("grid_origin", result.points[0] if result.n_points else np.zeros(3)), float)
-    index = {tuple(c): i for i, c in enumerate(cells.tolist())}
-    out = []
-    for p in np.asarray(result.points):
-        i = index.get(tuple(np.round((p - origin) / step).astype(int).tolist())) if np.isfinite(step) else None
-        ends = None if i is None else [a["orientation_axis_at_min"][i], a["orientation_axis_at_max"][i]]
-        out.append(None if ends is None or not np.all(np.isfinite(ends)) else np.round(ends, 5).tolist())
-    return out
+    lo, hi = result.arrays["point_axis_at_min"], result.arrays["point_axis_at_max"]
+    return [np.round([a, b], 5).tolist() if np.all(np.isfinite([a, b])) else None for a, b in zip(lo, hi)]
 
 
 def _details(result, mesh, shapes=None) -> dict:

@@ -112,15 +112,17 @@ class OrientationRanges:
         return self.tilt_min <= self.cone
 
     def per_point(self, n_points: int, cells_of_points: np.ndarray) -> dict:
-        """``tilt_min``, ``tilt_max`` and ``dexterous`` for each of the result's points (its cell's; NaN where
-        the cell was not solved)."""
+        """``tilt_min``, ``tilt_max``, ``axis_at_min``, ``axis_at_max`` and ``dexterous`` for each of the result's
+        points (its cell's; NaN where the cell was not solved)."""
         index = {tuple(c): i for i, c in enumerate(self.cell.tolist())}
         out = {k: np.full(n_points, np.nan) for k in ("tilt_min", "tilt_max")}
         out["dexterous"] = np.zeros(n_points, dtype=bool)
+        out["axis_at_min"], out["axis_at_max"] = np.full((n_points, 3), np.nan), np.full((n_points, 3), np.nan)
         for j, c in enumerate(cells_of_points.tolist()):
             i = index.get(tuple(c))
             if i is not None:
                 out["tilt_min"][j], out["tilt_max"][j] = self.tilt_min[i], self.tilt_max[i]
+                out["axis_at_min"][j], out["axis_at_max"][j] = self.axis_at_min[i], self.axis_at_max[i]
                 out["dexterous"][j] = self.dexterous[i]
         return out
 
@@ -275,7 +277,8 @@ def attach(result, ranges: OrientationRanges, task=None) -> None:
                          orientation_tilt_max=ranges.tilt_max, orientation_u_at_min=ranges.u_at_min,
                          orientation_u_at_max=ranges.u_at_max, orientation_axis_at_min=ranges.axis_at_min,
                          orientation_axis_at_max=ranges.axis_at_max, orientation_variation=ranges.variation,
-                         orientation_reference=ranges.reference)
+                         orientation_reference=ranges.reference, point_axis_at_min=per["axis_at_min"],
+                         point_axis_at_max=per["axis_at_max"])
     m = {"reference": ranges.reference.tolist(), "cells": int(len(ranges.point)), "solved": int(solved.sum()),
          "tilt_min_deg": float(np.nanmin(ranges.tilt_min)) if solved.any() else None,
          "tilt_max_deg": float(np.nanmax(ranges.tilt_max)) if solved.any() else None,
