@@ -312,9 +312,11 @@ class StaticModel:
             Hqq, Hqu = t.add_hessian(self, s, lam, Hqq, Hqu)
         return Hqq.tocsc(), Hqu
 
-    def contact_step_limit(self, q: np.ndarray, dq: np.ndarray) -> float:
-        """The share of the Newton step dq (free dofs) the terms allow (:meth:`Term.step_limit`)."""
-        return min([t.step_limit(self, q, dq) for t in self.terms] + [1.0])
+    def contact_step_limit(self, q: np.ndarray, dq: np.ndarray) -> tuple[float, bool]:
+        """The share of the Newton step dq (free dofs) the terms allow (:meth:`Term.step_limit`), and whether
+        the step so cut is taken as it is (the binding term's :attr:`Term.cut_judged` is False)."""
+        limits = [(t.step_limit(self, q, dq), not t.cut_judged) for t in self.terms]
+        return min(limits + [(1.0, False)], key=lambda a: a[0])
 
     def contacts(self, q: np.ndarray) -> list[dict]:
         """What the terms report at q: per obstacle (and per self-contact pair) its name, the total force

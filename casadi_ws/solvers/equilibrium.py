@@ -202,12 +202,14 @@ class _Guard:
         return float(np.max(np.linalg.norm(d.reshape(-1, 3), axis=1) / self.size))
 
 
-def _taken_anyway(alpha: float, alpha0: float, rel_try: float, rel: float, fresh_contact: bool) -> bool:
+def _taken_anyway(alpha: float, alpha0: float, rel_try: float, rel: float, fresh_contact: bool,
+                  cut_taken: bool = True) -> bool:
     """Whether :func:`_newton` takes a step the monotonicity test objects to (the caller has checked that it
     stays within the trust region)."""
-    if alpha == alpha0 < 1.0:
+    if cut_taken and alpha == alpha0 < 1.0:
         # a step cut where a contact point reaches its surface: taken as it is; the Newton step beyond it,
-        # which the test judges, crosses the contact's switch and means little
+        # which the test judges, crosses the contact's switch and means little (not so a barrier's cut step,
+        # Term.cut_judged: taken as it is, it bounced off the barrier and back, 478 iterations on the gripper)
         return True
     if rel_try < 1e-2 * rel:
         # in soft, cable-loaded bodies the correction can stall in a soft mode while the residual, which is
@@ -291,7 +293,8 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
             dq = -fac.solve(R)
         its += 1
         size = np.linalg.norm(dq)
-        alpha = alpha0 = model.contact_step_limit(q, dq) if contact else 1.0
+        alpha, cut_taken = model.contact_step_limit(q, dq) if contact else (1.0, False)
+        alpha0 = alpha
         while True:
             q_try = q.copy()
             q_try[free] += alpha * dq
@@ -305,7 +308,7 @@ def _newton(model, u, q, load, tol, max_iter, fac: Factorization | None, target:
             theta = np.linalg.norm(dq_bar) / size if dq_bar is not None else np.inf
             ok = bool(theta < 1.0 - alpha / 4.0)
             if not ok and np.isfinite(theta) and guard.reach(alpha * dq) <= TRUST_REGION:
-                ok = _taken_anyway(alpha, alpha0, rel_try, rel, fresh and contact)
+                ok = _taken_anyway(alpha, alpha0, rel_try, rel, fresh and contact, cut_taken)
             ok = ok and not crushes
             if rel < tol and not (ok and rel_try < rel and alpha * size > 1e-13 * np.linalg.norm(q)):
                 # polishing towards ``target`` has reached round-off (the residual of trunk_table at rest

@@ -176,6 +176,12 @@ class Term:
         """What the stability test holds on the nodal free dofs (a matrix added to K), or None."""
         return None
 
+    cut_judged = False
+    """Whether a Newton step its :meth:`step_limit` cut is still judged by the monotonicity test (and halved
+    where it fails): a barrier's energy sees the contact the cut step lands in, so its residual means something.
+    False: the cut step is taken as it is (a complementarity row's residual beyond the contact's switch means
+    little)."""
+
     def step_limit(self, model, q, dq) -> float:
         """The share of a Newton step dq (free dofs) it allows."""
         return 1.0
