@@ -84,13 +84,14 @@ def _in_pieces(model, settings, pieces):
 COARSE = {  # problem: (n_d, settings that interpolate)
     "finger_object": (9, dict(stride=2)),
     "trunk_2cables": (7, dict(stride=3)),
-    "trunk_table": (7, dict(stride=3)),
+    "trunk_table": (5, dict(stride=2)),
     "trunk_2cables_order2": (4, dict(stride=2)),
-    "sofa_trunk_2cables": (7, dict(stride=3)),
+    "sofa_trunk_2cables": (5, dict(stride=2)),
     "pneunet_finger": (4, dict(stride=2)),
     "trunk_3cables": (4, dict(stride=2, across=2)),
-    "trunk_4cables": (3, dict(stride=2, across=2)),
 }
+"""(trunk_4cables, 3^4 points twice, is left out: trunk_3cables sweeps planes across the same way, in a
+third of the time)"""
 
 
 @pytest.mark.slow

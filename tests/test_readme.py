@@ -185,7 +185,7 @@ def _check_outputs(outputs, tmp_path):
 
 
 def _forward_points_in_their_ranges(m, res):
-    """Issue 72's check: 40 random points of an n_d = 8 grid of U, each solved from rest (the contact-free trunk
+    """Issue 72's check: 20 random points of an n_d = 8 grid of U, each solved from rest (the contact-free trunk
     has one equilibrium per input: tests/test_branch.py), have their tilt from the reference within their cell's
     range, up to the cell's variation."""
     import numpy as np
@@ -197,7 +197,7 @@ def _forward_points_in_their_ranges(m, res):
     index = {tuple(c): i for i, c in enumerate(a["orientation_cells"].tolist())}
     rng = np.random.default_rng(0)
     inside = found = 0
-    for _ in range(40):
+    for _ in range(20):
         u = m.u_min + rng.integers(0, 8, m.n_u) / 7 * (m.u_max - m.u_min)
         eq = solve_equilibrium(m, u)
         i = index.get(tuple(np.round((eq.tip - origin) / step).astype(int).tolist()))
@@ -208,7 +208,7 @@ def _forward_points_in_their_ranges(m, res):
         lo, hi, var = a["orientation_tilt_min"][i], a["orientation_tilt_max"][i], a["orientation_variation"][i]
         assert lo - var <= tilt <= hi + var, (u, tilt, lo, hi, var)
         inside += bool(lo - 0.01 <= tilt <= hi + 0.01)
-    assert found >= 36 and inside >= 0.9 * found  # (forward-backward's cells miss a few of the grid's tips)
+    assert found >= 18 and inside >= 0.9 * found  # (forward-backward's cells miss a few of the grid's tips)
 
 
 def test_the_readme_python_script_runs_as_written(tmp_path):
