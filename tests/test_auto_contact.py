@@ -3,6 +3,8 @@ theory on the stacked cantilevers, a finger curled onto its own base checked by 
 contact code (every boundary node against every tetrahedron), Newton's third law, finite differences, and
 bad input."""
 
+import json
+
 import numpy as np
 import pytest
 import yaml
@@ -176,3 +178,21 @@ def test_newton_through_first_contact_takes_at_most_twice_the_contact_free_itera
     assert eq.iterations <= 2 * free.iterations, (eq.iterations, free.iterations)
     (c,) = [c for c in m.contacts(eq.q) if c["kind"] == "self"]
     assert c["points"] > 0 and not nodes_inside_other_tetrahedra(m, eq.q)
+
+
+def test_the_docs_numbers_on_the_trunk_curling_onto_itself_are_the_benchmarks():
+    """docs/methods.md and docs/sofa.md state what scripts/bench_self_contact.py measured
+    (benchmarks/self_contact_trunk.json): the fold's share of the stroke, the pairs pressing there, how much the
+    pattern grew, and the iterations of the step of first contact against the contact-free one before it."""
+    b = json.loads((REPO / "benchmarks" / "self_contact_trunk.json").read_text())
+    ok = [r for r in b["steps"] if r["status"] == "converged"]
+    last = ok[-1]
+    first = next(i for i, r in enumerate(ok) if r["pairs"] > 0)
+    methods = (REPO / "docs" / "methods.md").read_text()
+    sofa = (REPO / "docs" / "sofa.md").read_text()
+    assert f"{100 * last['share']:.1f} %" in sofa and f"{last['pairs']} pairs pressing" in sofa
+    assert f"{last['pairs']} pairs pressing" in methods
+    assert (f"grew {last['pattern_grew']} times, from {b['nnz_without_self_contact']:,} to {last['nnz']:,} entries"
+            in methods)
+    ratio = ok[first]["iterations"] / ok[first - 1]["iterations"]
+    assert f"takes {ratio:.1f}x the iterations of the contact-free one before it" in methods
