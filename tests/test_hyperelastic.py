@@ -220,7 +220,9 @@ def test_the_pressure_formulations_do_not_lock_as_nu_goes_to_one_half(tmp_path):
     the error grows as K/mu does); mixed -1.0 % and -1.3 %, taylor_hood -0.61 % and -0.62 % (none)."""
     disp = [_sphere_volume_error(tmp_path, nu, "displacement") for nu in (0.45, 0.4999)]
     print(f"sphere volume change - 1: displacement {disp}")
-    assert disp[1] < 3 * disp[0] < 0  # the plain element locks
+    # the plain element meets the 2 % the others meet below at nu = 0.45 and locks past it at 0.4999 (the bar
+    # is the formulations', not a band drawn around the measured values)
+    assert abs(disp[0]) < 0.02 and disp[1] < -0.02
     for formulation in ("mixed", "taylor_hood"):
         err = [_sphere_volume_error(tmp_path, nu, formulation) for nu in (0.45, 0.4999)]
         print(f"{formulation} {err}")
@@ -245,11 +247,12 @@ def _cantilever_tip_error(n, formulation):
 @pytest.mark.parametrize("n, formulation, low, high", [
     (2, "taylor_hood", -0.02, 0.02),  # measured -1.75 %
     (3, "mixed", -0.02, 0.02),  # +0.7 % (+3.4 % at two across: one pressure per element is soft there)
-    (2, "displacement", -0.05, -0.03),  # -3.9 %: how far the plain element is off (docs/methods.md)
+    (2, "displacement", -np.inf, -0.02),  # -3.9 %: the plain element locks, stiffer than the 2 % bar
 ])
 def test_a_nearly_incompressible_cantilever_two_elements_across(n, formulation, low, high):
     """The issue's check: nu = 0.499, 10-node, two elements across, tip within 2 % of beam theory, met by the
-    continuous pressure (Taylor-Hood); the mean dilatation needs three across."""
+    continuous pressure (Taylor-Hood); the mean dilatation needs three across; the plain displacement element
+    does not meet it (too stiff: locking)."""
     assert low < _cantilever_tip_error(n, formulation) < high
 
 
