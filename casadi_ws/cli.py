@@ -8,6 +8,7 @@ Bad input prints one line naming the file and key; ``--debug`` shows the Python 
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import sys
 from pathlib import Path
@@ -89,15 +90,31 @@ def _prepare_out(path: str, overwrite: bool, resume: bool = False) -> tuple[Path
             return out, "done"
         print(f"casadi-ws: --resume: no checkpoint in {out} (the run had not written one yet): starting the run",
               file=sys.stderr)
-        out.mkdir(parents=True, exist_ok=True)
+        _writable(out)
         return out, "new"
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise UsageError(f"--out: {out} already holds files; pass --overwrite to replace them or --resume to "
                          f"continue an interrupted run")
     if out.exists() and overwrite:
         (out / CHECKPOINT).unlink(missing_ok=True)
-    out.mkdir(parents=True, exist_ok=True)
+        (out / "summary.json").unlink(missing_ok=True)  # until the new one is written, no complete result is there
+    _writable(out)
     return out, "new"
+
+
+_WRITE_ERRORS = {errno.ENOSPC, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EPERM, errno.EDQUOT}
+"""What a full disk, a file-size limit, a read-only or a forbidden folder raise while files are written."""
+
+
+def _writable(out: Path) -> None:
+    """--out made and written to before any heavy work: a folder that cannot take files is one line."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".casadi-ws-write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise UsageError(f"--out: cannot write into {out}: {exc.strerror or exc}") from None
 
 
 def _print_finished(out: Path) -> int:
@@ -221,6 +238,12 @@ def cmd_solve(args) -> int:
         print(f"casadi-ws: interrupted; the checkpoint in {out} continues with the same command and --resume",
               file=sys.stderr)
         return 130
+    except OSError as exc:  # the checkpoint could not be written: a full disk, a folder gone read-only
+        if exc.errno not in _WRITE_ERRORS:
+            raise
+        print(f"casadi-ws: cannot write the checkpoint into {out}: {exc.strerror or exc}; free the space or give "
+              f"another --out, then run the same command with --resume", file=sys.stderr)
+        return 2
     finally:
         if executor is not None:
             executor.close()
@@ -238,6 +261,13 @@ def cmd_solve(args) -> int:
         print(f"casadi-ws: interrupted while writing the results into {out}; some files may be missing: run the "
               f"same command with --overwrite to compute them again", file=sys.stderr)
         return 130
+    except OSError as exc:  # summary.json is written last: the folder does not pass for a complete result
+        if exc.errno not in _WRITE_ERRORS:
+            raise
+        print(f"casadi-ws: cannot write the results into {out}: {exc.strerror or exc}; no summary.json was "
+              f"written (the result is incomplete): free the space, then run the same command with --overwrite",
+              file=sys.stderr)
+        return 2
     return 0
 
 

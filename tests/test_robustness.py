@@ -196,3 +196,59 @@ def test_ctrl_c_stops_cleanly_with_a_resumable_checkpoint(tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert json.loads((out / "summary.json").read_text())["n_points"] == 24 * 24
+
+
+def _size_limited(limit: int):
+    """A child process whose files may not grow past ``limit`` bytes (what a full disk does to a write: the
+    kernel refuses it, EFBIG here, ENOSPC there; Python ignores SIGXFSZ, so it raises OSError)."""
+    import resource
+
+    return lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+
+def test_a_disk_that_fills_while_the_results_are_written_is_one_line_and_no_complete_looking_result(tmp_path):
+    """Issue 66's fault: the disk fills while ``solve`` writes (a 200 kB file-size limit: report.html is MBs).
+    Exit 2, one line naming the folder and the reason, and no summary.json -- the mark of a complete result,
+    written last -- so nothing reads the half-written folder as a result; a complete result that --overwrite was
+    replacing loses its summary.json first, so the mixed folder does not pass for either."""
+    prob = _coarse_problem(tmp_path)
+    out = tmp_path / "out"
+    base = _cli("solve", prob, "--nd", "3", "--quiet", "--shapes", "0", "--out", out)
+    assert subprocess.run(base, capture_output=True, text=True).returncode == 0 and (out / "summary.json").exists()
+    r = subprocess.run(base + ["--overwrite"], capture_output=True, text=True, preexec_fn=_size_limited(200_000))
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1, r.stderr[-3000:]
+    assert lines[0].startswith("casadi-ws: cannot write the results into") and "File too large" in lines[0]
+    assert not (out / "summary.json").exists()
+    r = subprocess.run(_cli("report", out, "--out", tmp_path / "r.html"), capture_output=True, text=True)
+    assert r.returncode == 2 and "not a result directory" in r.stderr
+
+
+def test_an_out_folder_that_cannot_take_files_is_refused_before_the_run(tmp_path):
+    """--out where a file already is (a folder cannot be made there; a read-only folder fails the same probe
+    write): one line, exit 2, before any model is built."""
+    prob = _coarse_problem(tmp_path)
+    (tmp_path / "taken").write_text("a file\n")
+    r = subprocess.run(_cli("solve", prob, "--nd", "3", "--out", tmp_path / "taken" / "out"), capture_output=True,
+                       text=True)
+    assert r.returncode == 2 and r.stderr.strip().count("\n") == 0
+    assert r.stderr.startswith("casadi-ws: error: --out: cannot write into") and "Not a directory" in r.stderr
+
+
+def test_a_disk_that_fills_during_a_run_keeps_the_last_checkpoint_and_resumes(tmp_path):
+    """The disk fills while a run writes its checkpoint (a 5 kB file-size limit): exit 2, one line saying
+    --resume continues; no partial checkpoint is left, and --resume without the limit finishes the run with
+    every point (that a resumed run's points are an uninterrupted one's: test_killed_run_resumes_to_the_same_result)."""
+    prob = _coarse_problem(tmp_path)
+    base = ["solve", prob, "--nd", "12", "--checkpoint-every", "0.2", "--quiet", "--shapes", "0"]
+    out = tmp_path / "out"
+    r = subprocess.run(_cli(*base, "--out", out), capture_output=True, text=True, preexec_fn=_size_limited(5000))
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1, r.stderr[-3000:]
+    assert lines[0] == (f"casadi-ws: cannot write the checkpoint into {out}: File too large; free the space or give "
+                        f"another --out, then run the same command with --resume")
+    assert not list(out.glob(".*.tmp")) and not (out / "summary.json").exists()
+    r = subprocess.run(_cli(*base, "--out", out, "--resume"), capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr[-3000:]
+    res = load_result(out)
+    assert res.n_points + res.n_failed == 12**2 and res.n_failed == 0

@@ -41,11 +41,12 @@ def write_outputs(result, problem, out, quiet: bool = True, boundary: bool = Tru
         measure(result, problem, boundary)
     limit = shape_count(problem.mesh, MAX_SHAPES if shapes is None else shapes)
     states = _shape_states(result, problem, limit, shape_points)
-    result.save(out)
+    result.save(out, summary=False)  # summary.json, the mark of a complete result, after every other file
     scene = write_scene(problem, out)
     three_views(result, out / "three_views.png", problem.mesh, title=f"{problem.name}: {result.method} workspace")
     workspace_3d(result, out / "workspace_3d.png", problem.mesh, title=f"{problem.name}: {result.method}")
     write_report(result, out / "report.html", problem.mesh, getattr(problem, "obstacles", []), states)
+    result.write_summary(out)
     for w in result.warnings():
         print(f"casadi-ws: warning: {w}", file=sys.stderr)
     if not quiet:

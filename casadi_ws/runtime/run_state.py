@@ -57,10 +57,14 @@ def save_checkpoint(directory: str | Path, meta: dict, arrays: dict) -> Path:
     d.mkdir(parents=True, exist_ok=True)
     final = d / CHECKPOINT
     tmp = d / f".{CHECKPOINT}.{os.getpid()}.tmp"
-    with open(tmp, "wb") as f:
-        np.savez(f, __meta__=np.array(json.dumps(meta, default=_plain)), **arrays)
-        f.flush()
-        os.fsync(f.fileno())
+    try:
+        with open(tmp, "wb") as f:
+            np.savez(f, __meta__=np.array(json.dumps(meta, default=_plain)), **arrays)
+            f.flush()
+            os.fsync(f.fileno())
+    except OSError:  # a full disk: the last whole checkpoint stays, the partial one goes
+        tmp.unlink(missing_ok=True)
+        raise
     os.replace(tmp, final)
     return final
 

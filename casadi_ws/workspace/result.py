@@ -29,6 +29,7 @@ Files written by :meth:`WorkspaceResult.save` into a directory:
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -182,10 +183,12 @@ class WorkspaceResult:
                       "time_s": "s", "volume": "m^3", "area": "m^2"},
         }
 
-    def save(self, directory: str | Path) -> Path:
+    def save(self, directory: str | Path, summary: bool = True) -> Path:
+        """The result files in ``directory``; ``summary.json``, which marks a result complete (what reads a
+        result looks for it), last (``summary`` False: not at all, the caller writes more files first and
+        then :meth:`write_summary`)."""
         d = Path(directory)
         d.mkdir(parents=True, exist_ok=True)
-        (d / "summary.json").write_text(json.dumps(self.summary(), indent=2, default=_json_default) + "\n")
         self._save_points_csv(d / "points.csv")
         self._save_failures_csv(d / "failures.csv")
         arrays = dict(points=self.points, u=self.u, failed_u=self.failed_u, failed_status=self.failed_status,
@@ -206,7 +209,16 @@ class WorkspaceResult:
             self._save_cells(d / "dexterous.vtu", self.arrays["dexterous_centres"], with_data=False)
         if b is not None and len(b.triangles):
             self._save_boundary(d)
+        if summary:
+            self.write_summary(d)
         return d
+
+    def write_summary(self, directory: str | Path) -> None:
+        """``summary.json``, whole or not at all (written beside and renamed): the mark of a complete result."""
+        d = Path(directory)
+        part = d / "summary.json.partial"
+        part.write_text(json.dumps(self.summary(), indent=2, default=_json_default) + "\n")
+        os.replace(part, d / "summary.json")
 
     def maps(self) -> dict:
         """The point maps (:mod:`casadi_ws.workspace.maps`) as arrays, NaN where not computed; with the
