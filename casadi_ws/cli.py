@@ -157,12 +157,28 @@ def _task(args, problem):
 
 def _executor(args, problem):
     """A Dask client for --scheduler, else None (the method starts its own workers)."""
+    tls = getattr(args, "tls", None)
     if not args.scheduler:
+        if tls:
+            raise UsageError("--tls: the credentials of a tls:// --scheduler; no --scheduler was given")
         return None
     from .runtime.executor import DaskExecutor, SchedulerError
 
+    security = None
+    if args.scheduler.startswith("tls://"):
+        if not tls:
+            raise UsageError(f"--scheduler {args.scheduler}: a TLS scheduler needs --tls DIR, the folder "
+                             f"'casadi-ws cluster-certs' wrote and the scheduler and workers use")
+        from .runtime.tls import security as tls_security
+
+        try:
+            security = tls_security(tls)
+        except ValueError as exc:
+            raise UsageError(f"--tls: {exc}") from None
+    elif tls:
+        raise UsageError(f"--tls: the scheduler {args.scheduler} is not tls:// (start it with --protocol tls)")
     try:
-        ex = DaskExecutor(args.scheduler, problem=problem, timeout=5.0)
+        ex = DaskExecutor(args.scheduler, problem=problem, timeout=5.0, security=security)
     except SchedulerError as exc:
         raise UsageError(f"--scheduler: {exc}") from None
     if not args.quiet:
@@ -268,6 +284,23 @@ def cmd_solve(args) -> int:
               f"written (the result is incomplete): free the space, then run the same command with --overwrite",
               file=sys.stderr)
         return 2
+    return 0
+
+
+def cmd_cluster_certs(args) -> int:
+    from .runtime.tls import FILES, write_certificates
+
+    out = Path(args.out)
+    if args.days < 1:
+        raise UsageError(f"--days: expected an integer >= 1, got {args.days}")
+    there = [name for name in FILES.values() if (out / name).exists()]
+    if there and not args.overwrite:
+        raise UsageError(f"--out: {out} already holds {', '.join(there)}; pass --overwrite to replace them (the "
+                         f"scheduler and workers started with the old ones will refuse the new)")
+    _writable(out)
+    paths = write_certificates(out, args.days)
+    print(f"wrote {paths['ca']} {paths['cert']} {paths['key']} (valid {args.days} days): copy the folder to each "
+          f"machine of the cluster; the key is readable by its owner only")
     return 0
 
 
@@ -533,7 +566,10 @@ def _solve_parser(sub) -> None:
     s.add_argument("--force", action="store_true", help="forward: run even more than 10^8 equilibria")
     s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     s.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="run on an existing Dask cluster (e.g. tcp://host:8786; workers with --nthreads 1)")
+                   help="run on an existing Dask cluster (e.g. tls://host:8786 with --tls, or tcp://127.0.0.1:8786 "
+                        "on this machine; workers with --nthreads 1)")
+    s.add_argument("--tls", default=None, metavar="DIR",
+                   help="the credentials of a tls:// scheduler: the folder casadi-ws cluster-certs wrote")
     s.add_argument("--task-box", default=None, metavar="X0,Y0,Z0,X1,Y1,Z1",
                    help="a task region (m): summary.json reports the share of it the workspace reaches")
     s.add_argument("--task-points", default=None, metavar="CSV", help="task points x,y,z (m), instead of a box")
@@ -576,7 +612,10 @@ def _study_parser(sub) -> None:
     st.add_argument("--out", required=True, help="output directory")
     st.add_argument("--workers", type=int, default=1, help="trials run at once, each in its own process (1)")
     st.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                    help="run the trials on an existing Dask cluster (e.g. tcp://host:8786; workers with --nthreads 1)")
+                    help="run the trials on an existing Dask cluster (e.g. tls://host:8786 with --tls, or "
+                         "tcp://127.0.0.1:8786 on this machine; workers with --nthreads 1)")
+    st.add_argument("--tls", default=None, metavar="DIR",
+                    help="the credentials of a tls:// scheduler: the folder casadi-ws cluster-certs wrote")
     st.add_argument("--resume", action="store_true", help="continue the study whose study.db is in --out")
     st.add_argument("--overwrite", action="store_true", help="delete --out and start again")
     st.add_argument("--quiet", action="store_true", help="no progress bar or summary")
@@ -642,6 +681,13 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=cmd_compare)
 
     _study_parser(sub)
+
+    cc = sub.add_parser("cluster-certs", help="credentials for a TLS Dask cluster: a private authority and a "
+                                              "certificate for its scheduler, workers and clients")
+    cc.add_argument("--out", required=True, help="folder to write ca.pem, cluster.pem, cluster-key.pem into")
+    cc.add_argument("--days", type=int, default=365, help="days the certificates are valid (365)")
+    cc.add_argument("--overwrite", action="store_true", help="replace the credentials already there")
+    cc.set_defaults(func=cmd_cluster_certs)
 
     d = sub.add_parser("demo", help="forward workspace of the built-in default problem (2-cable trunk)")
     d.add_argument("--nd", type=int, default=11, help="values per actuator")

@@ -99,3 +99,59 @@ def test_unreachable_scheduler_fails_fast_with_the_address():
     assert r.returncode == 2 and r.stderr.count("\n") == 1
     assert "--scheduler: cannot reach the Dask scheduler at tcp://127.0.0.1:9" in r.stderr
     assert time.perf_counter() - t < 20
+
+
+@pytest.mark.slow
+def test_a_tls_cluster_gives_the_process_pools_cells_and_refuses_a_stranger(trunk, tmp_path):
+    """Issue 66: a scheduler and workers speaking TLS with the credentials casadi-ws cluster-certs writes; a
+    client holding them gets the process pool's forward-backward cells; a client holding another authority's
+    credentials, or none, is refused (one line, exit 2, on the command line)."""
+    from distributed import LocalCluster, Security
+
+    from casadi_ws.runtime.executor import SchedulerError
+    from casadi_ws.runtime.tls import FILES, security, write_certificates
+
+    pb, m = trunk
+    ours, theirs = tmp_path / "ours", tmp_path / "theirs"
+    write_certificates(ours), write_certificates(theirs)
+    assert (ours / FILES["key"]).stat().st_mode & 0o077 == 0  # the key: its owner's only
+    server = Security(tls_ca_file=str(ours / FILES["ca"]), tls_scheduler_cert=str(ours / FILES["cert"]),
+                      tls_scheduler_key=str(ours / FILES["key"]), tls_worker_cert=str(ours / FILES["cert"]),
+                      tls_worker_key=str(ours / FILES["key"]), tls_client_cert=str(ours / FILES["cert"]),
+                      tls_client_key=str(ours / FILES["key"]), require_encryption=True)
+    fs = cw.FBSettings(step=0.006, progress=False)
+    with cw.ProcessExecutor(2) as ex:
+        ref = cw.forward_backward(pb, fs, model=m, executor=ex)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, protocol="tls", security=server,
+                      host="127.0.0.1", dashboard_address=":0", silence_logs=50) as cluster:
+        address = cluster.scheduler_address
+        assert address.startswith("tls://")
+        with cw.DaskExecutor(address, problem=pb, security=security(ours)) as ex:
+            got = cw.forward_backward(pb, fs, model=m, executor=ex)
+        with pytest.raises(SchedulerError, match="cannot reach"):
+            cw.DaskExecutor(address, problem=pb, security=security(theirs), timeout=3.0)
+        for extra in (["--tls", str(theirs)], []):
+            r = subprocess.run([sys.executable, "-m", "casadi_ws.cli", "solve",
+                                str(REPO / "problems" / "trunk_2cables.yaml"), "--method", "fb", "--scheduler",
+                                address, *extra, "--out", str(tmp_path / "out"), "--overwrite"],
+                               capture_output=True, text=True)
+            assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr[-2000:]
+            assert ("cannot reach the Dask scheduler" if extra else "a TLS scheduler needs --tls DIR") in r.stderr
+    np.testing.assert_array_equal(np.asarray(ref.arrays["cells"]), np.asarray(got.arrays["cells"]))
+    np.testing.assert_allclose(ref.points, got.points, atol=1e-9)
+
+
+def test_a_plain_tcp_scheduler_is_still_accepted_where_the_user_asks_for_it():
+    """The README keeps a tcp:// scheduler to one machine (--host 127.0.0.1): its address works as it did, and
+    --tls with it is refused as a contradiction."""
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=":0",
+                      silence_logs=50) as cluster:
+        assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
+        with cw.DaskExecutor(cluster.scheduler_address) as ex:
+            assert ex.workers == 1
+        from casadi_ws.cli import main
+
+        assert main(["solve", str(REPO / "problems" / "trunk_2cables.yaml"), "--scheduler", cluster.scheduler_address,
+                     "--tls", "tls", "--out", "/tmp/casadi-ws-tcp-tls", "--overwrite"]) == 2

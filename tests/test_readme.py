@@ -44,7 +44,7 @@ forward cloud): running them here too would solve the same workspace twice in `m
 def command_chains(elsewhere: bool = False) -> list[list[str]]:
     """The README's commands grouped so that a command runs after those whose results it reads; those of
     :data:`RUN_ELSEWHERE` left out (or only those, with ``elsewhere``)."""
-    cmds = [c for c in readme_commands() if any(k in c for k in RUN_ELSEWHERE) == elsewhere]
+    cmds = [c for c in readme_commands() if any(k in c for k in RUN_ELSEWHERE) == elsewhere and not _is_certs(c)]
     chain = list(range(len(cmds)))  # union-find over command indices
 
     def root(i):
@@ -76,13 +76,31 @@ def _needs_scheduler(chain: list[str]) -> bool:
     return any("--scheduler" in c for c in chain)
 
 
+def _is_certs(cmd: str) -> bool:
+    """The Dask recipe's credentials command: run with the scheduler and workers (:func:`dask_daemons`), once."""
+    return shlex.split(cmd)[1] == "cluster-certs"
+
+
+def _tls(cmd: str, folder) -> str:
+    """The command with the recipe's credentials folder ``tls`` (after --out or --tls, or before a '/') moved to
+    ``folder``."""
+    cmd = re.sub(r"(?<=--out )tls(?=\s|$)|(?<=--tls )tls(?=\s|$)", str(folder), cmd)
+    return re.sub(r"(?<![\w/.:-])tls/", f"{folder}/", cmd)
+
+
 @pytest.fixture(scope="module")
-def dask_daemons():
-    """The Dask recipe's scheduler and workers, started as written (in the background, as the '&' says)."""
-    daemons = [subprocess.Popen(shlex.split(c.rstrip("&").strip()), cwd=REPO, stdout=subprocess.DEVNULL,
+def dask_daemons(tmp_path_factory):
+    """The Dask recipe as written: its credentials (in a temporary folder), then its scheduler and workers (in
+    the background, as the '&' says). Yields the credentials folder."""
+    folder = tmp_path_factory.mktemp("dask") / "tls"
+    (certs,) = [c for c in readme_commands() if _is_certs(c)]
+    r = subprocess.run([sys.executable, "-m", "casadi_ws.cli", *shlex.split(_tls(certs, folder))[1:]], cwd=REPO,
+                       capture_output=True, text=True)
+    assert r.returncode == 0 and (folder / "cluster-key.pem").stat().st_mode & 0o077 == 0, r.stderr
+    daemons = [subprocess.Popen(shlex.split(_tls(c, folder).rstrip("&").strip()), cwd=REPO, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL) for c in readme_commands(".venv/bin/dask ")]
     assert len(daemons) == 2
-    yield
+    yield folder
     for d in daemons:
         d.terminate()
     for d in daemons:
@@ -93,7 +111,8 @@ def test_the_readme_shows_every_kind_of_command_and_a_test_runs_each():
     kinds = {shlex.split(c)[1] for c in readme_commands()}
     assert {"equilibrium", "solve", "compare", "report", "boundary", "reach", "follow", "study",
             "import-sofa"} <= kinds
-    assert sum(len(c) for c in command_chains() + command_chains(elsewhere=True)) == len(readme_commands())
+    assert sum(len(c) for c in command_chains() + command_chains(elsewhere=True)) + sum(
+        map(_is_certs, readme_commands())) == len(readme_commands())
     for key, module in RUN_ELSEWHERE.items():  # the other test finds its command in the README and runs it
         text = (REPO / "tests" / module).read_text()
         assert "run_chain(" in text and key in text, module
@@ -105,7 +124,8 @@ def test_the_readme_shows_every_kind_of_command_and_a_test_runs_each():
                                    for c in command_chains()])
 def test_every_casadi_ws_command_of_the_readme_runs(chain, tmp_path, request):
     if _needs_scheduler(chain):
-        request.getfixturevalue("dask_daemons")
+        folder = request.getfixturevalue("dask_daemons")
+        chain = [_tls(c, folder) for c in chain]
     run_chain(chain, tmp_path)
 
 

@@ -404,13 +404,14 @@ class DaskExecutor(Executor):
     """
 
     def __init__(self, address: str | None = None, workers: int | None = None, problem=None,
-                 timeout: float = 10.0, window: int | None = None):
+                 timeout: float = 10.0, window: int | None = None, security=None):
         from distributed import Client, LocalCluster
 
         self._cluster = None
         if address:
             try:
-                self.client = Client(address, timeout=timeout)
+                # security: a distributed.Security for a tls:// scheduler (casadi_ws.runtime.tls.security)
+                self.client = Client(address, timeout=timeout, **({"security": security} if security else {}))
             except (OSError, TimeoutError) as exc:
                 raise SchedulerError(f"cannot reach the Dask scheduler at {address} within {timeout:g} s "
                                      f"({type(exc).__name__})") from None
