@@ -13,7 +13,7 @@ import sys
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from conftest import small_trunk
+from conftest import REPO, small_trunk
 from test_admissible import P_EULER, column
 
 import casadi_ws as cw
@@ -303,3 +303,21 @@ def test_the_methods_keep_numpy_arrays_in_small_pages_and_restore_the_setting():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
                          env=env | {"NUMPY_MADVISE_HUGEPAGE": "1"})
     assert out.stdout.split() == ["True", "True"], out.stderr[-2000:]
+
+
+@needs_pardiso
+def test_a_mesh_too_big_for_the_memory_is_refused_before_the_first_factorisation(monkeypatch, capsys):
+    """Issue 66: PARDISO's analysis counts the factors' nonzeros before any factorisation; where they would
+    take more than MEMORY_SHARE of the memory available (here made 1 MB), the command says so in one line --
+    the estimate and the limit -- and exits 2 instead of exhausting the machine. The estimate is the analysis's
+    own count (iparm 18), checked against the factors' size on a matrix whose factors are known: a diagonal."""
+    from casadi_ws.cli import main
+
+    monkeypatch.setattr(linear, "available_memory", lambda: 2**20)
+    assert main(["equilibrium", "--u", "10,0", str(REPO / "problems" / "trunk_2cables.yaml")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "too big for this machine's memory" in err[0] and "GiB available" in err[0]
+    monkeypatch.setattr(linear, "available_memory", lambda: 10 * 2**30)
+    n = 500
+    lu = factorize(sp.eye(n, format="csc") * 2.0, solver="pardiso")
+    assert n <= lu.analysis.factor_sizes[lu.analysis.ordering] <= n + 1  # a diagonal's n entries (PARDISO: n + 1)

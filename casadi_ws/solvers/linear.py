@@ -352,6 +352,12 @@ class _Analysis:
         canonical = np.ascontiguousarray(pattern.canonical[pattern.upper] if symmetric else pattern.canonical,
                                          dtype=self.dtype)
         self.pt = self._ordered(canonical, orderings)
+        if not pattern.analyses:  # the pattern's first analysis: the factors' size is known, none is made yet
+            try:
+                fits_in_memory(self.n, self.factor_sizes[self.ordering], np.dtype(self.dtype).itemsize)
+            except ValueError:
+                self._release(self.pt)
+                raise
 
     def _ordered(self, canonical, orderings) -> np.ndarray:
         """The handle of the analysis whose factors have fewer nonzeros, of METIS's nested dissection and
@@ -457,6 +463,39 @@ def _threads() -> int:
     bit-reproducible for a given count."""
     _mkl()
     return max(1, int(_LIB[1]()))
+
+
+MEMORY_SHARE = 0.8
+"""The most of the memory available one factorisation's factors may take (PARDISO's analysis counts their
+nonzeros before any is made); beyond, the model is refused (:func:`fits_in_memory`)."""
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (MemAvailable of /proc/meminfo); None where unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def fits_in_memory(n: int, factor_nonzeros: int, itemsize: int) -> None:
+    """Refuse, in one line (a ModelError: exit 2 on the command line), a tangent whose factors would not fit:
+    a mesh too big for the machine, said before the first factorisation (which would exhaust the memory, swap
+    for hours or be killed) with the estimate and the limit. Only PARDISO's analysis gives the size in advance;
+    with SuperLU there is no such check."""
+    avail = available_memory()
+    need = factor_nonzeros * itemsize
+    if avail is not None and need > MEMORY_SHARE * avail:
+        from ..fem.spec import ModelError
+
+        raise ModelError(f"the mesh is too big for this machine's memory: one factorisation of its tangent ({n} "
+                         f"unknowns; {factor_nonzeros:.3g} nonzeros in its factors, by PARDISO's analysis) needs "
+                         f"{need / 2**30:.3g} GiB, more than {100 * MEMORY_SHARE:.0f} % of the "
+                         f"{avail / 2**30:.3g} GiB available: coarsen the mesh or use a machine with more memory")
 
 
 def _analysis(pattern: _Pattern, symmetric: bool, single: bool = False, cholesky: bool = False) -> _Analysis:
