@@ -189,6 +189,7 @@ class WorkspaceResult:
         then :meth:`write_summary`)."""
         d = Path(directory)
         d.mkdir(parents=True, exist_ok=True)
+        (d / "summary.json").unlink(missing_ok=True)  # an older result's: until this one is whole, none is there
         self._save_points_csv(d / "points.csv")
         self._save_failures_csv(d / "failures.csv")
         arrays = dict(points=self.points, u=self.u, failed_u=self.failed_u, failed_status=self.failed_status,
