@@ -7,6 +7,8 @@ Richardson extrapolation of the two finest meshes (assuming the h^2 rate) lands 
 the analytic answer, which is what "converges to beam theory" means.
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 from conftest import cantilever
@@ -155,3 +157,24 @@ def test_quadratic_tetrahedra_match_the_closed_forms_at_two_elements_across(mode
     if model == "corotational":  # its closed form is exact for its law: the error keeps falling (0.71 -> 0.23 %)
         tip, exact, disp = _arc(1, theta=1.0, model=model, order=2)
         assert err2 < 0.5 * np.linalg.norm(tip - exact) / disp and err2 < 0.005
+
+
+def test_a_body_force_bends_a_cantilever_as_a_uniform_load_and_equals_the_weight_it_stands_for():
+    """``body_force`` (N/m^3): a cantilever (10-node, two across, L/h = 20, linear law) under b across its axis
+    deflects at the tip by w L^4 / (8 E I), w = b h^2 (within 2 %: the 10-node beam's tip-load error, shear);
+    and a body force rho g is the weight it stands for, to round-off (the same consistent nodal loads)."""
+
+    pb = cantilever(n=2, slender=20, order=2, L=0.2)
+    h, L, E = 0.01, 0.2, pb.material.young_modulus
+    b = 1e-3 * 8 * E * h**4 / 12 / (h * h * L**3)  # a tip deflection of 1e-3 L: small strains
+    pb.body_force = np.array([b, 0.0, 0.0])
+    eq = solve_equilibrium(StaticModel(pb), np.zeros(0))
+    assert eq.converged
+    exact = b * h * h * L**4 / (8 * E * h**4 / 12)
+    assert (eq.tip[0] - pb.end_effector[0]) / exact == pytest.approx(1.0, abs=0.02)
+    rho = 1000.0
+    weight = cantilever(n=2, slender=20, order=2, L=0.2)
+    weight.material = dataclasses.replace(weight.material, density=rho)
+    weight.gravity = np.array([b / rho, 0.0, 0.0])
+    eq_w = solve_equilibrium(StaticModel(weight), np.zeros(0))
+    np.testing.assert_allclose(eq_w.q, eq.q, atol=1e-12 * L)

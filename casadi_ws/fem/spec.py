@@ -139,6 +139,9 @@ class ModelSpec:
     tip_frame: np.ndarray | None = None
     """Three points (3, 3) at the tip whose plane carries its orientation (:mod:`casadi_ws.fem.frame`); None:
     the tip elements' rotation."""
+    body_force: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """A force per unit volume (3,), N/m^3, uniform over the body (a load field that is not weight: a magnetic
+    or buoyant body, a manufactured solution's source), as consistent nodal loads."""
     terms: list = field(default_factory=list)
     """Terms added to those the fields above make (:mod:`casadi_ws.fem.terms`): a problem file's ``springs``
     and ``pressure_loads``, or a user's own :class:`casadi_ws.fem.terms.Term`. Each model works on a copy."""

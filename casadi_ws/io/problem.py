@@ -85,7 +85,7 @@ def nodes_on_plane(mesh: Mesh, point, normal, tolerance: float = 1e-9) -> np.nda
 # YAML reading and validation
 # ---------------------------------------------------------------------------------------------------------
 
-_TOP_KEYS = {"name", "description", "mesh", "material", "material_regions", "gravity", "fixed", "cables",
+_TOP_KEYS = {"name", "description", "mesh", "material", "material_regions", "gravity", "body_force", "fixed", "cables",
              "cavities", "end_effector", "loads", "solver", "workspace", "task", "admissibility", "obstacles",
              "self_contact", "springs", "pressure_loads"}
 _MESH_GEN = {"generate", "length", "radius_base", "radius_tip", "resolution", "size", "divisions", "origin",
@@ -1026,6 +1026,7 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
         material = replace(material, density=r.number(m, "total_mass", "material", lo=0.0) / float(mesh.volumes().sum()))
     regions = _read_regions(r, d.get("material_regions"), mesh, material)
     gravity = r.vector(d["gravity"], "gravity") if d.get("gravity") is not None else np.zeros(3)
+    body_force = r.vector(d["body_force"], "body_force") if d.get("body_force") is not None else np.zeros(3)
     obstacles = _read_obstacles(r, d.get("obstacles"), mesh, base)
     springs = _read_springs(r, d.get("springs"), mesh)
     held = [t.nodes for t in springs]
@@ -1083,7 +1084,7 @@ def problem_from_dict(d: Any, source: str = "<dict>", base: Path | None = None) 
     return Problem(mesh, material, fixed, cables + cavities, end_effector, gravity, loads, solver, name=name,
                    source=source, regions=regions, partial_fixed=partial_fixed, admissibility=admissibility,
                    obstacles=obstacles, self_contact=self_contact, self_contact_auto=self_contact_auto, terms=terms,
-                   workspace=workspace, task=task, tip_frame=tip_frame)
+                   workspace=workspace, task=task, tip_frame=tip_frame, body_force=body_force)
 
 
 def read_yaml(path: str | Path, what: str = "problem file", error=None):
